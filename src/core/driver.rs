@@ -1,0 +1,256 @@
+//! The headless driver of the PhysBAM slides: frames of length Δ, each advanced in substeps
+//! that land exactly on the frame's end, with a divergence guard that keeps the last good
+//! state and says what happened.
+
+use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, StepError};
+use crate::core::ode::{OdeState, OdeSystem};
+use crate::math::Scalar;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// How the substep size is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum StepPolicy {
+    /// A fixed step `h` (the largest step for adaptive methods).
+    Fixed {
+        /// Step size (s).
+        h: f64,
+    },
+    /// `h = number × (spring time scale)`, the smallest over springs of `√(μ/k)` and `μ/b`
+    /// (explicit stability limits of one spring), capped by `max`.
+    Cfl {
+        /// CFL number (0.5 in the PhysBAM slides).
+        number: f64,
+        /// Upper bound on the step (s).
+        max: f64,
+    },
+}
+
+impl Default for StepPolicy {
+    fn default() -> Self {
+        StepPolicy::Fixed { h: 1e-3 }
+    }
+}
+
+/// Why a simulation stopped.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DivergenceReason {
+    /// A position or velocity became NaN or infinite.
+    NonFinite,
+    /// Kinetic energy exceeded the guard's bound.
+    EnergyBlowup {
+        /// Kinetic energy reached.
+        kinetic: f64,
+        /// The bound.
+        bound: f64,
+    },
+    /// The integrator could not take a step.
+    Step(StepError),
+}
+
+/// A detected divergence. The state was restored to the last good one (before the failing
+/// step).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Divergence {
+    /// Frame being computed.
+    pub frame: u64,
+    /// Time at the start of the failing step.
+    pub time: f64,
+    /// Step size of the failing step.
+    pub h: f64,
+    /// Method in use.
+    pub integrator: IntegratorKind,
+    /// What happened.
+    pub reason: DivergenceReason,
+}
+
+impl fmt::Display for Divergence {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let what = match &self.reason {
+            DivergenceReason::NonFinite => "the state became non-finite".to_string(),
+            DivergenceReason::EnergyBlowup { kinetic, bound } => {
+                format!("kinetic energy {kinetic:.3e} J exceeded the bound {bound:.3e} J")
+            }
+            DivergenceReason::Step(e) => e.to_string(),
+        };
+        write!(
+            f,
+            "{} diverged at frame {}, t = {:.6} s (h = {:.3e} s): {what}; kept the last good state. \
+             Try a smaller h, more damping, or a more stable method (RK4, or an implicit one)",
+            self.integrator.label(),
+            self.frame,
+            self.time,
+            self.h
+        )
+    }
+}
+
+impl std::error::Error for Divergence {}
+
+/// What one frame cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameReport {
+    /// Substeps taken.
+    pub substeps: u32,
+    /// Smallest and largest substep.
+    pub h_min: Scalar,
+    /// Largest substep.
+    pub h_max: Scalar,
+}
+
+/// Settings of a [`Simulation`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DriverConfig {
+    /// Which method.
+    pub integrator: IntegratorKind,
+    /// How substeps are sized.
+    pub policy: StepPolicy,
+    /// Frame length Δ (s).
+    pub frame_dt: f64,
+    /// Tolerances of adaptive methods.
+    pub adaptive: AdaptiveConfig,
+    /// Stop when kinetic energy exceeds this multiple of the system's energy scale
+    /// (`None`: only non-finite states stop a run).
+    pub energy_guard: Option<f64>,
+}
+
+impl Default for DriverConfig {
+    fn default() -> Self {
+        Self {
+            integrator: IntegratorKind::Rk4,
+            policy: StepPolicy::default(),
+            frame_dt: 1.0 / 60.0,
+            adaptive: AdaptiveConfig::default(),
+            energy_guard: Some(1e6),
+        }
+    }
+}
+
+/// A system, its state and a method, advanced frame by frame.
+pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
+    /// The layout.
+    pub system: Sys,
+    /// The current state.
+    pub state: S,
+    /// Current time (s).
+    pub time: Scalar,
+    /// Frames completed.
+    pub frame: u64,
+    config: DriverConfig,
+    integrator: Box<dyn Integrator<S, Sys>>,
+    backup: S,
+    energy_bound: Option<Scalar>,
+    start_time: Scalar,
+}
+
+impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
+    /// A simulation starting at time 0.
+    pub fn new(system: Sys, mut state: S, config: DriverConfig) -> Self {
+        system.apply_constraints(0.0, &mut state);
+        let integrator = config.integrator.build::<S, Sys>(config.adaptive);
+        let energy_bound = config.energy_guard.and_then(|f| system.energy_scale(&state).map(|s| s * f as Scalar));
+        let backup = state.clone();
+        Self { system, state, time: 0.0, frame: 0, config, integrator, backup, energy_bound, start_time: 0.0 }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &DriverConfig {
+        &self.config
+    }
+
+    /// Switches method (the step-size policy and state are kept).
+    pub fn set_integrator(&mut self, kind: IntegratorKind) {
+        self.config.integrator = kind;
+        self.integrator = kind.build::<S, Sys>(self.config.adaptive);
+    }
+
+    /// Counters of the current integrator.
+    pub fn stats(&self) -> IntegratorStats {
+        self.integrator.stats()
+    }
+
+    /// The step size the policy gives now.
+    pub fn step_size(&self) -> Scalar {
+        match self.config.policy {
+            StepPolicy::Fixed { h } => h as Scalar,
+            StepPolicy::Cfl { number, max } => {
+                let ts = self.system.time_scale().unwrap_or(Scalar::INFINITY);
+                (number as Scalar * ts).min(max as Scalar)
+            }
+        }
+    }
+
+    /// End time of frame `k` (computed from the frame index, so time never drifts).
+    fn frame_end(&self, k: u64) -> Scalar {
+        self.start_time + (k as f64 * self.config.frame_dt) as Scalar
+    }
+
+    /// Advances one frame in substeps that land exactly on its end.
+    pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
+        let t_end = self.frame_end(self.frame + 1);
+        let h_pol = self.step_size();
+        let mut rep = FrameReport { substeps: 0, h_min: Scalar::INFINITY, h_max: 0.0 };
+        while self.time < t_end {
+            let remaining = t_end - self.time;
+            // Within 0.1 % of the end: take the remainder rather than leave a sliver (the
+            // slides' `min(dt_max, 1.001 (t_frame − t))`, landing exactly).
+            let (h, last) = if remaining <= h_pol * 1.001 { (remaining, true) } else { (h_pol, false) };
+            let t = self.time;
+            self.system.apply_constraints(t, &mut self.state);
+            self.backup.copy_from(&self.state);
+            let fail = |reason, h| Divergence {
+                frame: self.frame,
+                time: t as f64,
+                h: h as f64,
+                integrator: self.config.integrator,
+                reason,
+            };
+            let taken = match self.integrator.step(&self.system, t, h, &mut self.state) {
+                Ok(taken) => taken,
+                Err(e) => {
+                    self.state.copy_from(&self.backup);
+                    return Err(fail(DivergenceReason::Step(e), h));
+                }
+            };
+            let t_new = if last && taken >= h { t_end } else { t + taken };
+            self.system.apply_constraints(t_new, &mut self.state);
+            self.system.resolve_contacts(t_new, taken, &mut self.state);
+            if !self.state.is_finite() {
+                self.state.copy_from(&self.backup);
+                return Err(fail(DivergenceReason::NonFinite, taken));
+            }
+            if let Some(bound) = self.energy_bound {
+                let k = self.system.kinetic_energy(&self.state);
+                if !(k <= bound) {
+                    self.state.copy_from(&self.backup);
+                    return Err(fail(DivergenceReason::EnergyBlowup { kinetic: k as f64, bound: bound as f64 }, taken));
+                }
+            }
+            self.time = t_new;
+            rep.substeps += 1;
+            rep.h_min = rep.h_min.min(taken);
+            rep.h_max = rep.h_max.max(taken);
+        }
+        self.frame += 1;
+        Ok(rep)
+    }
+
+    /// Advances `frames` frames, calling `on_frame` after each.
+    pub fn run(&mut self, frames: u64, mut on_frame: impl FnMut(&Self, &FrameReport)) -> Result<(), Divergence> {
+        for _ in 0..frames {
+            let rep = self.advance_frame()?;
+            on_frame(self, &rep);
+        }
+        Ok(())
+    }
+
+    /// Advances until `time` (rounded up to whole frames).
+    pub fn run_until(&mut self, time: f64) -> Result<(), Divergence> {
+        let frames = ((time - self.time as f64) / self.config.frame_dt - 1e-9).ceil().max(0.0) as u64;
+        self.run(frames, |_, _| {})
+    }
+}
+

@@ -1,0 +1,240 @@
+//! Time integrators. Each is generic over the state ([`OdeState`]) and the system
+//! ([`OdeSystem`]), owns its scratch states (created on the first step, reused afterwards: a
+//! step allocates nothing), and is selected at run time by an [`IntegratorKind`].
+
+mod adaptive;
+mod explicit;
+
+pub use adaptive::{AdaptiveConfig, DormandPrince};
+pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
+
+use crate::core::ode::{OdeState, OdeSystem};
+use crate::math::Scalar;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+
+/// Which time integrator advances a system. Parsed from names (`"rk4"`, `"forward_euler"`)
+/// and from the one-letter codes of the classic sample solution's command line.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
+#[serde(rename_all = "snake_case")]
+pub enum IntegratorKind {
+    /// `e`: forward (explicit) Euler, order 1.
+    ForwardEuler,
+    /// `s`: symplectic (semi-implicit) Euler, order 1, for second-order systems.
+    SymplecticEuler,
+    /// `t`: explicit trapezoid (Heun), order 2.
+    Trapezoid,
+    /// `m`: explicit midpoint, order 2.
+    Midpoint,
+    /// `r`: classic Runge–Kutta, order 4.
+    #[default]
+    Rk4,
+    /// `a`: adaptive Dormand–Prince 5(4) with error control.
+    Rk45,
+}
+
+impl IntegratorKind {
+    /// Every kind, in the order charts and tables list them.
+    pub const ALL: [IntegratorKind; 6] = [
+        IntegratorKind::ForwardEuler,
+        IntegratorKind::SymplecticEuler,
+        IntegratorKind::Trapezoid,
+        IntegratorKind::Midpoint,
+        IntegratorKind::Rk4,
+        IntegratorKind::Rk45,
+    ];
+
+    /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`).
+    pub fn letter(self) -> char {
+        match self {
+            Self::ForwardEuler => 'e',
+            Self::SymplecticEuler => 's',
+            Self::Trapezoid => 't',
+            Self::Midpoint => 'm',
+            Self::Rk4 => 'r',
+            Self::Rk45 => 'a',
+        }
+    }
+
+    /// The canonical name (`forward_euler`, `rk4`, ...), also used in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ForwardEuler => "forward_euler",
+            Self::SymplecticEuler => "symplectic_euler",
+            Self::Trapezoid => "trapezoid",
+            Self::Midpoint => "midpoint",
+            Self::Rk4 => "rk4",
+            Self::Rk45 => "rk45",
+        }
+    }
+
+    /// A human label for panels and charts.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::ForwardEuler => "forward Euler",
+            Self::SymplecticEuler => "symplectic Euler",
+            Self::Trapezoid => "trapezoid (Heun)",
+            Self::Midpoint => "midpoint",
+            Self::Rk4 => "RK4",
+            Self::Rk45 => "RK45 (Dormand-Prince)",
+        }
+    }
+
+    /// Order of accuracy (global error `O(h^p)`); for RK45 the order of the propagated
+    /// solution.
+    pub fn order(self) -> u32 {
+        match self {
+            Self::ForwardEuler | Self::SymplecticEuler => 1,
+            Self::Trapezoid | Self::Midpoint => 2,
+            Self::Rk4 => 4,
+            Self::Rk45 => 5,
+        }
+    }
+
+    /// Derivative evaluations per (accepted, fixed) step.
+    pub fn stages(self) -> u32 {
+        match self {
+            Self::ForwardEuler | Self::SymplecticEuler => 1,
+            Self::Trapezoid | Self::Midpoint => 2,
+            Self::Rk4 => 4,
+            Self::Rk45 => 6,
+        }
+    }
+
+    /// True when the step size is chosen by error control rather than given.
+    pub fn is_adaptive(self) -> bool {
+        matches!(self, Self::Rk45)
+    }
+
+    /// Builds the integrator for states of type `S` and systems of type `Sys`.
+    pub fn build<S: OdeState, Sys: OdeSystem<S> + ?Sized>(
+        self,
+        adaptive: AdaptiveConfig,
+    ) -> Box<dyn Integrator<S, Sys>> {
+        match self {
+            Self::ForwardEuler => Box::new(ForwardEuler::default()),
+            Self::SymplecticEuler => Box::new(SymplecticEuler::default()),
+            Self::Trapezoid => Box::new(Trapezoid::default()),
+            Self::Midpoint => Box::new(Midpoint::default()),
+            Self::Rk4 => Box::new(Rk4::default()),
+            Self::Rk45 => Box::new(DormandPrince::new(adaptive)),
+        }
+    }
+}
+
+impl fmt::Display for IntegratorKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The text did not name an integrator.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct UnknownIntegrator(pub String);
+
+impl fmt::Display for UnknownIntegrator {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "unknown integrator '{}'; expected one of: ", self.0)?;
+        for (i, k) in IntegratorKind::ALL.iter().enumerate() {
+            if i > 0 {
+                f.write_str(", ")?;
+            }
+            write!(f, "{} ({})", k.letter(), k.name())?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for UnknownIntegrator {}
+
+impl FromStr for IntegratorKind {
+    type Err = UnknownIntegrator;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let l = s.trim().to_ascii_lowercase().replace(['-', ' '], "_");
+        let k = match l.as_str() {
+            "e" | "euler" | "forward_euler" | "explicit_euler" => Self::ForwardEuler,
+            "s" | "symplectic" | "symplectic_euler" | "semi_implicit_euler" => Self::SymplecticEuler,
+            "t" | "trapezoid" | "trapezoidal" | "heun" => Self::Trapezoid,
+            "m" | "midpoint" => Self::Midpoint,
+            "r" | "rk4" | "runge_kutta" => Self::Rk4,
+            "a" | "rk45" | "adaptive" | "dopri5" | "dormand_prince" | "ode45" => Self::Rk45,
+            _ => return Err(UnknownIntegrator(s.to_string())),
+        };
+        Ok(k)
+    }
+}
+
+/// Why a step could not be taken.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StepError {
+    /// The step size was not a positive finite number.
+    BadStepSize(Scalar),
+    /// An adaptive method needed a step below its minimum to meet its tolerance.
+    StepSizeUnderflow {
+        /// The step it would have needed.
+        h: Scalar,
+    },
+    /// The method needs a second-order state (positions and velocities).
+    NeedsSecondOrder(IntegratorKind),
+}
+
+impl fmt::Display for StepError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::BadStepSize(h) => write!(f, "step size {h} is not a positive finite number"),
+            Self::StepSizeUnderflow { h } => {
+                write!(f, "adaptive step size fell to {h:e} to meet the tolerance (stiff or diverging system)")
+            }
+            Self::NeedsSecondOrder(k) => {
+                write!(f, "{} needs a second-order (position, velocity) state", k.label())
+            }
+        }
+    }
+}
+
+impl std::error::Error for StepError {}
+
+/// Counters an integrator keeps over its life (reset with [`Integrator::reset`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct IntegratorStats {
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps (adaptive methods).
+    pub rejected: u64,
+    /// Derivative (force) evaluations.
+    pub evaluations: u64,
+}
+
+/// A time integrator for states `S` of systems `Sys`.
+pub trait Integrator<S: OdeState, Sys: OdeSystem<S> + ?Sized>: Send + Sync {
+    /// Which method this is.
+    fn kind(&self) -> IntegratorKind;
+
+    /// Advances `state` from time `t` by at most `h`, returning the step actually taken.
+    /// Fixed-step methods always take `h`; adaptive ones take the largest step their error
+    /// control accepts, never more than `h` (so the caller can land on frame boundaries).
+    /// On error the state is unchanged.
+    fn step(&mut self, sys: &Sys, t: Scalar, h: Scalar, state: &mut S) -> Result<Scalar, StepError>;
+
+    /// Counters since construction or the last reset.
+    fn stats(&self) -> IntegratorStats;
+
+    /// Forgets step-size history and cached derivatives and zeroes the counters.
+    fn reset(&mut self);
+}
+
+/// Checks a step size.
+pub(crate) fn check_h(h: Scalar) -> Result<(), StepError> {
+    if h.is_finite() && h > 0.0 { Ok(()) } else { Err(StepError::BadStepSize(h)) }
+}
+
+/// Returns the scratch slot, cloning `like` into it the first time (the only allocation an
+/// integrator makes).
+pub(crate) fn scratch<'a, S: OdeState>(slot: &'a mut Option<S>, like: &S) -> &'a mut S {
+    if slot.as_ref().is_none_or(|s| s.dim() != like.dim()) {
+        *slot = Some(like.clone());
+    }
+    slot.get_or_insert_with(|| like.clone())
+}

@@ -1,0 +1,13 @@
+//! The numerics, free of Bevy: ODE abstraction, integrators, the particle model and its
+//! forces, collisions, scene layouts and the headless driver. Everything here can be tested,
+//! benchmarked and charted without a window or an App.
+
+pub mod build;
+pub mod collide;
+pub mod driver;
+pub mod forces;
+pub mod integrate;
+pub mod motion;
+pub mod ode;
+pub mod particles;
+pub mod scene;

@@ -1,0 +1,405 @@
+//! The mass-spring particle model as an [`OdeSystem`]: second-order dynamics
+//! `x'' = M⁻¹ f(x, x', t)` written first-order as `X = (x, v)`, `X' = (v, M⁻¹ f)`.
+//!
+//! A model is layout only: masses, which particles are pinned or move on prescribed paths,
+//! and the forces it has. Every force is optional and costs nothing when absent.
+
+use crate::core::collide::Collider;
+use crate::core::forces::{Springs, Wind, WindField};
+use crate::core::motion::Motion;
+use crate::core::ode::{Energy, OdeSystem, ParticleState};
+use crate::math::{Scalar, Vector};
+
+/// How a particle's degrees of freedom are governed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Dof {
+    /// Moved by forces.
+    Free,
+    /// Held at a fixed position.
+    Pinned,
+    /// Moved along a prescribed path (index into the model's motions).
+    Prescribed(u32),
+}
+
+/// Particles, their masses and constraints, and the forces acting on them.
+#[derive(Clone, Debug, Default)]
+pub struct ParticleModel {
+    mass: Vec<Scalar>,
+    inv_mass: Vec<Scalar>,
+    pinned: Vec<(u32, Vector)>,
+    prescribed: Vec<(u32, Motion)>,
+    /// Springs and spring dampers.
+    pub springs: Springs,
+    /// Gravitational acceleration (zero: no gravity term is evaluated).
+    pub gravity: Vector,
+    /// Viscous drag `−k v` on every free particle (zero: skipped).
+    pub drag: Scalar,
+    wind: Option<(Wind, WindField)>,
+    external: Option<Vec<Vector>>,
+    /// Shapes the particles collide with (empty: no collision pass).
+    pub colliders: Vec<Collider>,
+}
+
+/// Why a model cannot be simulated.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ModelError {
+    /// A free particle's mass is zero, negative or not finite.
+    BadMass {
+        /// Particle index.
+        particle: usize,
+        /// The mass.
+        mass: Scalar,
+    },
+    /// A spring refers to a particle that does not exist.
+    SpringOutOfRange {
+        /// Spring index.
+        spring: usize,
+        /// The bad particle index.
+        particle: usize,
+    },
+    /// A spring's parameters are not usable.
+    BadSpring {
+        /// Spring index.
+        spring: usize,
+        /// What is wrong.
+        reason: &'static str,
+    },
+    /// A particle index (pin, motion, force) is out of range.
+    ParticleOutOfRange {
+        /// The bad index.
+        particle: usize,
+    },
+    /// A parameter is not finite.
+    NonFinite(&'static str),
+}
+
+impl std::fmt::Display for ModelError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::BadMass { particle, mass } => {
+                write!(f, "particle {particle}: mass {mass} must be positive and finite unless the particle is pinned")
+            }
+            Self::SpringOutOfRange { spring, particle } => {
+                write!(f, "spring {spring}: particle index {particle} is out of range")
+            }
+            Self::BadSpring { spring, reason } => write!(f, "spring {spring}: {reason}"),
+            Self::ParticleOutOfRange { particle } => write!(f, "particle index {particle} is out of range"),
+            Self::NonFinite(what) => write!(f, "{what} is not finite"),
+        }
+    }
+}
+
+impl std::error::Error for ModelError {}
+
+impl ParticleModel {
+    /// A model of particles with the given masses, all free, with no forces.
+    pub fn new(mass: Vec<Scalar>) -> Self {
+        let inv_mass = mass.iter().map(|&m| if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 }).collect();
+        Self { mass, inv_mass, ..Default::default() }
+    }
+
+    /// Number of particles.
+    pub fn len(&self) -> usize {
+        self.mass.len()
+    }
+
+    /// True when there are no particles.
+    pub fn is_empty(&self) -> bool {
+        self.mass.is_empty()
+    }
+
+    /// Masses.
+    pub fn mass(&self) -> &[Scalar] {
+        &self.mass
+    }
+
+    /// Inverse masses (zero for pinned and prescribed particles).
+    pub fn inv_mass(&self) -> &[Scalar] {
+        &self.inv_mass
+    }
+
+    /// Pins particle `i` at `position`.
+    pub fn pin(&mut self, i: usize, position: Vector) {
+        self.release(i);
+        self.pinned.push((i as u32, position));
+        self.inv_mass[i] = 0.0;
+    }
+
+    /// Moves particle `i` along `motion`.
+    pub fn prescribe(&mut self, i: usize, motion: Motion) {
+        self.release(i);
+        self.prescribed.push((i as u32, motion));
+        self.inv_mass[i] = 0.0;
+    }
+
+    /// Frees particle `i` (from a pin or a prescribed motion).
+    pub fn release(&mut self, i: usize) {
+        self.pinned.retain(|(p, _)| *p as usize != i);
+        self.prescribed.retain(|(p, _)| *p as usize != i);
+        let m = self.mass[i];
+        self.inv_mass[i] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+    }
+
+    /// How particle `i` moves.
+    pub fn dof(&self, i: usize) -> Dof {
+        if self.pinned.iter().any(|(p, _)| *p as usize == i) {
+            return Dof::Pinned;
+        }
+        match self.prescribed.iter().position(|(p, _)| *p as usize == i) {
+            Some(k) => Dof::Prescribed(k as u32),
+            None => Dof::Free,
+        }
+    }
+
+    /// Pinned particles and where they are held.
+    pub fn pins(&self) -> &[(u32, Vector)] {
+        &self.pinned
+    }
+
+    /// Particles with prescribed motion.
+    pub fn motions(&self) -> &[(u32, Motion)] {
+        &self.prescribed
+    }
+
+    /// Turns wind on (or off with `None`).
+    pub fn set_wind(&mut self, wind: Option<Wind>) {
+        self.wind = wind.filter(|w| w.enabled).map(|w| (w, w.field()));
+    }
+
+    /// The wind, if on.
+    pub fn wind(&self) -> Option<&Wind> {
+        self.wind.as_ref().map(|(w, _)| w)
+    }
+
+    /// Sets a constant external force on particle `i`.
+    pub fn set_external_force(&mut self, i: usize, f: Vector) {
+        let n = self.len();
+        self.external.get_or_insert_with(|| vec![Vector::ZERO; n])[i] = f;
+    }
+
+    /// Per-particle external forces, if any were set.
+    pub fn external_forces(&self) -> Option<&[Vector]> {
+        self.external.as_deref()
+    }
+
+    /// Checks that the model can be simulated: masses of free particles positive and finite,
+    /// spring indices in range, parameters finite.
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let n = self.len();
+        for (i, &m) in self.mass.iter().enumerate() {
+            if self.inv_mass[i] == 0.0 && matches!(self.dof(i), Dof::Free) || !m.is_finite() && m != 0.0 {
+                return Err(ModelError::BadMass { particle: i, mass: m });
+            }
+        }
+        for (k, s) in self.springs.as_slice().iter().enumerate() {
+            for p in [s.i as usize, s.j as usize] {
+                if p >= n {
+                    return Err(ModelError::SpringOutOfRange { spring: k, particle: p });
+                }
+            }
+            if s.i == s.j {
+                return Err(ModelError::BadSpring { spring: k, reason: "joins a particle to itself" });
+            }
+            if !(s.k.is_finite() && s.k >= 0.0) {
+                return Err(ModelError::BadSpring { spring: k, reason: "stiffness must be finite and non-negative" });
+            }
+            if !(s.rest.is_finite() && s.rest >= 0.0) {
+                return Err(ModelError::BadSpring { spring: k, reason: "rest length must be finite and non-negative" });
+            }
+            if !(s.damping.is_finite() && s.damping >= 0.0) {
+                return Err(ModelError::BadSpring { spring: k, reason: "damping must be finite and non-negative" });
+            }
+        }
+        for &(p, x) in &self.pinned {
+            if p as usize >= n {
+                return Err(ModelError::ParticleOutOfRange { particle: p as usize });
+            }
+            if !x.is_finite() {
+                return Err(ModelError::NonFinite("pin position"));
+            }
+        }
+        for (p, m) in &self.prescribed {
+            if *p as usize >= n {
+                return Err(ModelError::ParticleOutOfRange { particle: *p as usize });
+            }
+            if !m.is_finite() {
+                return Err(ModelError::NonFinite("prescribed motion"));
+            }
+        }
+        if !self.gravity.is_finite() {
+            return Err(ModelError::NonFinite("gravity"));
+        }
+        if !(self.drag.is_finite() && self.drag >= 0.0) {
+            return Err(ModelError::NonFinite("drag (must be finite and non-negative)"));
+        }
+        if let Some(e) = &self.external {
+            if e.len() != n {
+                return Err(ModelError::ParticleOutOfRange { particle: e.len() });
+            }
+            if !e.iter().all(|f| f.is_finite()) {
+                return Err(ModelError::NonFinite("external force"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds every force into `f` (one entry per particle), without dividing by mass.
+    pub fn accumulate_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]) {
+        if !self.springs.is_empty() {
+            self.springs.accumulate(&state.x, &state.v, f);
+        }
+        let wind_c = self.wind.as_ref().map_or(0.0, |(_, w)| w.coefficient());
+        let c = self.drag + wind_c;
+        if c != 0.0 {
+            let push = match &self.wind {
+                Some((_, w)) => w.velocity(t) * wind_c,
+                None => Vector::ZERO,
+            };
+            for (fi, vi) in f.iter_mut().zip(&state.v) {
+                *fi += push - *vi * c;
+            }
+        }
+        if let Some(ext) = &self.external {
+            for (fi, e) in f.iter_mut().zip(ext) {
+                *fi += *e;
+            }
+        }
+    }
+
+    /// Smallest explicit step bound over the springs: `min(√(μ/k), μ/b)` with `μ` the reduced
+    /// mass of the two free ends (the period and damping time of one spring, up to 2π);
+    /// `None` when no spring constrains it.
+    pub fn spring_time_scale(&self) -> Option<Scalar> {
+        let mut best: Option<Scalar> = None;
+        for s in self.springs.as_slice() {
+            let (wi, wj) = (self.inv_mass[s.i as usize], self.inv_mass[s.j as usize]);
+            let w = wi + wj; // 1/μ
+            if w == 0.0 {
+                continue;
+            }
+            let mu = 1.0 / w;
+            let mut dt = Scalar::INFINITY;
+            if s.k > 0.0 {
+                dt = dt.min((mu / s.k).sqrt());
+            }
+            if s.damping > 0.0 {
+                dt = dt.min(mu / s.damping);
+            }
+            if dt.is_finite() {
+                best = Some(best.map_or(dt, |b: Scalar| b.min(dt)));
+            }
+        }
+        best
+    }
+}
+
+impl OdeSystem<ParticleState> for ParticleModel {
+    fn derivative(&self, t: Scalar, state: &ParticleState, out: &mut ParticleState) {
+        out.x.copy_from_slice(&state.v);
+        out.v.fill(Vector::ZERO);
+        self.accumulate_forces(t, state, &mut out.v);
+        let g = self.gravity;
+        for (a, &w) in out.v.iter_mut().zip(&self.inv_mass) {
+            // Pinned and prescribed particles have w = 0 and get no gravity.
+            *a = if w > 0.0 { *a * w + g } else { Vector::ZERO };
+        }
+        for &(p, _) in &self.pinned {
+            out.x[p as usize] = Vector::ZERO;
+        }
+        for (p, m) in &self.prescribed {
+            let (_, v, a) = m.eval(t);
+            out.x[*p as usize] = v;
+            out.v[*p as usize] = a;
+        }
+    }
+
+    fn apply_constraints(&self, t: Scalar, state: &mut ParticleState) {
+        for &(p, x) in &self.pinned {
+            state.x[p as usize] = x;
+            state.v[p as usize] = Vector::ZERO;
+        }
+        for (p, m) in &self.prescribed {
+            let (x, v, _) = m.eval(t);
+            state.x[*p as usize] = x;
+            state.v[*p as usize] = v;
+        }
+    }
+
+    fn energy(&self, _t: Scalar, state: &ParticleState) -> Option<Energy> {
+        let mut kinetic = 0.0;
+        let mut potential = 0.0;
+        for i in 0..self.len() {
+            let m = self.mass[i];
+            if m > 0.0 {
+                kinetic += 0.5 * m * state.v[i].length_squared();
+                if self.inv_mass[i] > 0.0 {
+                    potential -= m * self.gravity.dot(state.x[i]);
+                }
+            }
+        }
+        potential += self.springs.energy(&state.x);
+        if let Some(ext) = &self.external {
+            for (i, e) in ext.iter().enumerate() {
+                if self.inv_mass[i] > 0.0 {
+                    potential -= e.dot(state.x[i]);
+                }
+            }
+        }
+        Some(Energy { kinetic, potential })
+    }
+
+    fn kinetic_energy(&self, state: &ParticleState) -> Scalar {
+        self.mass
+            .iter()
+            .zip(&state.v)
+            .filter(|(m, _)| **m > 0.0)
+            .map(|(m, v)| 0.5 * m * v.length_squared())
+            .sum()
+    }
+
+    /// Kinetic plus elastic energy now, plus the work gravity and external forces could do
+    /// over the body's extent plus one metre: a body that stays physical never gets kinetic
+    /// energy many times this.
+    fn energy_scale(&self, state: &ParticleState) -> Option<Scalar> {
+        if self.is_empty() {
+            return None;
+        }
+        let (mut lo, mut hi) = (state.x[0], state.x[0]);
+        for x in &state.x {
+            lo = lo.min(*x);
+            hi = hi.max(*x);
+        }
+        let reach = (hi - lo).length() + 1.0;
+        let total_mass: Scalar = self.mass.iter().filter(|m| m.is_finite()).sum();
+        let ext: Scalar = self.external.as_ref().map_or(0.0, |e| e.iter().map(|f| f.length()).sum());
+        let wind = self.wind.as_ref().map_or(0.0, |(w, _)| {
+            let speed = crate::math::vec3(w.velocity).length() + w.gust as Scalar * 3.0;
+            0.5 * total_mass * speed * speed
+        });
+        let motion: Scalar = self
+            .prescribed
+            .iter()
+            .map(|(p, m)| {
+                let (_, v, a) = m.eval(0.0);
+                let mi = self.mass[*p as usize].max(0.0);
+                0.5 * total_mass.max(mi) * (v.length_squared() + a.length() * reach)
+            })
+            .sum();
+        let e = self.kinetic_energy(state)
+            + self.springs.energy(&state.x)
+            + (total_mass * self.gravity.length() + ext) * reach
+            + wind
+            + motion;
+        Some(e.max(1e-6))
+    }
+
+    fn time_scale(&self) -> Option<Scalar> {
+        self.spring_time_scale()
+    }
+
+    fn resolve_contacts(&self, t: Scalar, _h: Scalar, state: &mut ParticleState) {
+        for c in &self.colliders {
+            c.resolve(t, &mut state.x, &mut state.v, &self.inv_mass);
+        }
+    }
+}

@@ -1,0 +1,373 @@
+//! Scenes as data: everything a simulation starts from (particles, masses, pins, springs,
+//! forces, colliders, initial state), readable from and writable to JSON. Numbers are stored
+//! as `f64` whatever the crate's precision, so a JSON round trip is exact.
+
+use crate::core::collide::{Collider, ColliderDesc};
+use crate::core::forces::{SpringLaw, Wind};
+use crate::core::motion::Motion;
+use crate::core::ode::ParticleState;
+use crate::core::particles::ParticleModel;
+use crate::math::{sc, vec3};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// One particle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParticleDesc {
+    /// Initial position (m).
+    pub position: [f64; 3],
+    /// Initial velocity (m/s).
+    #[serde(default)]
+    pub velocity: [f64; 3],
+    /// Mass (kg); may be zero for pinned or prescribed particles.
+    pub mass: f64,
+    /// Held fixed at its initial position.
+    #[serde(default)]
+    pub pinned: bool,
+}
+
+/// What a spring is for (builders tag them; the physics does not care).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
+#[serde(rename_all = "snake_case")]
+pub enum SpringKind {
+    /// Grid neighbours.
+    #[default]
+    Structural,
+    /// Diagonals.
+    Shear,
+    /// Skip-one neighbours (bending).
+    Flex,
+}
+
+/// One spring.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpringDesc {
+    /// First particle index.
+    pub a: usize,
+    /// Second particle index.
+    pub b: usize,
+    /// Stiffness: N/m for Hooke, N for strain.
+    pub stiffness: f64,
+    /// Damper along the spring (N·s/m).
+    #[serde(default)]
+    pub damping: f64,
+    /// Rest length; the initial distance when absent.
+    #[serde(default)]
+    pub rest_length: Option<f64>,
+    /// Force law.
+    #[serde(default)]
+    pub law: SpringLaw,
+    /// Role in the layout.
+    #[serde(default)]
+    pub kind: SpringKind,
+}
+
+/// A particle moved along a prescribed path.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionDesc {
+    /// Particle index.
+    pub particle: usize,
+    /// Its path.
+    pub motion: Motion,
+}
+
+/// A constant force on one particle.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForceDesc {
+    /// Particle index.
+    pub particle: usize,
+    /// Force (N).
+    pub force: [f64; 3],
+}
+
+/// A surface to draw: triangles over particle indices, with optional texture coordinates
+/// (one per particle).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Surface {
+    /// Counter-clockwise triangles.
+    pub triangles: Vec<[u32; 3]>,
+    /// Texture coordinates per particle (empty: none).
+    #[serde(default)]
+    pub uvs: Vec<[f32; 2]>,
+}
+
+/// A whole layout.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Name, for logs and file names.
+    #[serde(default)]
+    pub name: String,
+    /// Gravitational acceleration (m/s²).
+    #[serde(default)]
+    pub gravity: [f64; 3],
+    /// Viscous drag coefficient (N·s/m) on every particle.
+    #[serde(default)]
+    pub drag: f64,
+    /// Particles.
+    pub particles: Vec<ParticleDesc>,
+    /// Springs.
+    #[serde(default)]
+    pub springs: Vec<SpringDesc>,
+    /// Particles with prescribed motion.
+    #[serde(default)]
+    pub motions: Vec<MotionDesc>,
+    /// Constant external forces.
+    #[serde(default)]
+    pub forces: Vec<ForceDesc>,
+    /// Wind.
+    #[serde(default)]
+    pub wind: Option<Wind>,
+    /// Colliders.
+    #[serde(default)]
+    pub colliders: Vec<ColliderDesc>,
+    /// Surface to draw.
+    #[serde(default)]
+    pub surface: Option<Surface>,
+}
+
+/// One problem found in a scene, with the path of the field (`springs[3].b`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FieldError {
+    /// Where.
+    pub path: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for FieldError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.path, self.message)
+    }
+}
+
+/// Every problem found in a scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneError {
+    /// The problems, in document order.
+    pub errors: Vec<FieldError>,
+}
+
+impl SceneError {
+    /// True when some error's path is `path`.
+    pub fn has(&self, path: &str) -> bool {
+        self.errors.iter().any(|e| e.path == path)
+    }
+}
+
+impl fmt::Display for SceneError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "invalid scene ({} problem{})", self.errors.len(), if self.errors.len() == 1 { "" } else { "s" })?;
+        for e in &self.errors {
+            write!(f, "\n  {e}")?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+fn finite3(a: &[f64; 3]) -> bool {
+    a.iter().all(|x| x.is_finite())
+}
+
+/// Largest scene the builders and the reader accept (particles), so that a typo cannot ask
+/// for all the machine's memory.
+pub const MAX_PARTICLES: usize = 4_000_000;
+/// Largest number of springs accepted.
+pub const MAX_SPRINGS: usize = 40_000_000;
+
+impl Scene {
+    /// Reads a scene from JSON and validates it. Syntax errors report line and column; every
+    /// invalid field is reported with its path.
+    pub fn from_json(text: &str) -> Result<Scene, SceneError> {
+        let scene: Scene = serde_json::from_str(text).map_err(|e| SceneError {
+            errors: vec![FieldError { path: format!("line {}, column {}", e.line(), e.column()), message: e.to_string() }],
+        })?;
+        scene.validate()?;
+        Ok(scene)
+    }
+
+    /// Writes pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("a scene always serializes")
+    }
+
+    /// Checks every field; returns all problems at once.
+    pub fn validate(&self) -> Result<(), SceneError> {
+        let mut errs = Vec::new();
+        let mut err = |path: String, message: &str| errs.push(FieldError { path, message: message.to_string() });
+        let n = self.particles.len();
+        if n > MAX_PARTICLES {
+            err("particles".into(), &format!("{n} particles is more than the limit of {MAX_PARTICLES}"));
+        }
+        if self.springs.len() > MAX_SPRINGS {
+            err("springs".into(), &format!("more than the limit of {MAX_SPRINGS} springs"));
+        }
+        if !finite3(&self.gravity) {
+            err("gravity".into(), "must be finite");
+        }
+        if !(self.drag.is_finite() && self.drag >= 0.0) {
+            err("drag".into(), "must be finite and non-negative");
+        }
+        let mut kinematic = vec![false; n];
+        for (k, m) in self.motions.iter().enumerate() {
+            if m.particle >= n {
+                err(format!("motions[{k}].particle"), "index out of range");
+            } else {
+                kinematic[m.particle] = true;
+            }
+            if !m.motion.is_finite() {
+                err(format!("motions[{k}].motion"), "must be finite");
+            }
+        }
+        for (i, p) in self.particles.iter().enumerate() {
+            if !finite3(&p.position) {
+                err(format!("particles[{i}].position"), "must be finite");
+            }
+            if !finite3(&p.velocity) {
+                err(format!("particles[{i}].velocity"), "must be finite");
+            }
+            let fixed = p.pinned || kinematic[i];
+            if !p.mass.is_finite() || p.mass < 0.0 || (p.mass == 0.0 && !fixed) {
+                err(
+                    format!("particles[{i}].mass"),
+                    if fixed { "must be finite and non-negative" } else { "must be positive and finite (or pin the particle)" },
+                );
+            }
+        }
+        for (k, s) in self.springs.iter().enumerate() {
+            if s.a >= n {
+                err(format!("springs[{k}].a"), "index out of range");
+            }
+            if s.b >= n {
+                err(format!("springs[{k}].b"), "index out of range");
+            }
+            if s.a == s.b {
+                err(format!("springs[{k}].b"), "a spring cannot join a particle to itself");
+            }
+            if !(s.stiffness.is_finite() && s.stiffness >= 0.0) {
+                err(format!("springs[{k}].stiffness"), "must be finite and non-negative");
+            }
+            if !(s.damping.is_finite() && s.damping >= 0.0) {
+                err(format!("springs[{k}].damping"), "must be finite and non-negative");
+            }
+            match s.rest_length {
+                Some(l) if !(l.is_finite() && l >= 0.0) => {
+                    err(format!("springs[{k}].rest_length"), "must be finite and non-negative")
+                }
+                Some(l) if l == 0.0 && s.law == SpringLaw::Strain => {
+                    err(format!("springs[{k}].rest_length"), "a strain-law spring needs a positive rest length")
+                }
+                None if s.law == SpringLaw::Strain && s.a < n && s.b < n && s.a != s.b => {
+                    let (pa, pb) = (self.particles[s.a].position, self.particles[s.b].position);
+                    let d2: f64 = (0..3).map(|c| (pa[c] - pb[c]).powi(2)).sum();
+                    if d2 == 0.0 {
+                        err(format!("springs[{k}].rest_length"), "a strain-law spring needs a positive rest length");
+                    }
+                }
+                _ => {}
+            }
+        }
+        for (k, f) in self.forces.iter().enumerate() {
+            if f.particle >= n {
+                err(format!("forces[{k}].particle"), "index out of range");
+            }
+            if !finite3(&f.force) {
+                err(format!("forces[{k}].force"), "must be finite");
+            }
+        }
+        if let Some(w) = &self.wind {
+            if !(finite3(&w.velocity) && w.gust.is_finite() && w.frequency.is_finite())
+                || !(w.coefficient.is_finite() && w.coefficient >= 0.0)
+            {
+                err("wind".into(), "numbers must be finite and the coefficient non-negative");
+            }
+        }
+        for (k, c) in self.colliders.iter().enumerate() {
+            if !c.shape.is_valid() {
+                err(format!("colliders[{k}].shape"), "dimensions must be finite and positive");
+            }
+            if !c.motion.is_finite() {
+                err(format!("colliders[{k}].motion"), "must be finite");
+            }
+            let q = c.rotation;
+            let qn: f64 = q.iter().map(|x| x * x).sum();
+            if !(qn.is_finite() && qn > 1e-12) {
+                err(format!("colliders[{k}].rotation"), "must be a finite non-zero quaternion");
+            }
+            let m = &c.material;
+            for (name, v) in [
+                ("friction", m.friction),
+                ("restitution", m.restitution),
+                ("thickness", m.thickness),
+                ("bounce_threshold", m.bounce_threshold),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    err(format!("colliders[{k}].material.{name}"), "must be finite and non-negative");
+                }
+            }
+        }
+        if let Some(s) = &self.surface {
+            for (k, t) in s.triangles.iter().enumerate() {
+                if t.iter().any(|&i| i as usize >= n) {
+                    err(format!("surface.triangles[{k}]"), "index out of range");
+                }
+            }
+            if !s.uvs.is_empty() && s.uvs.len() != n {
+                err("surface.uvs".into(), "needs one entry per particle");
+            }
+        }
+        if errs.is_empty() { Ok(()) } else { Err(SceneError { errors: errs }) }
+    }
+
+    /// Rest length of spring `k` (given, or the initial distance).
+    pub fn rest_length(&self, k: usize) -> f64 {
+        let s = &self.springs[k];
+        s.rest_length.unwrap_or_else(|| {
+            let (a, b) = (self.particles[s.a].position, self.particles[s.b].position);
+            (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>().sqrt()
+        })
+    }
+
+    /// The initial state.
+    pub fn initial_state(&self) -> ParticleState {
+        ParticleState {
+            x: self.particles.iter().map(|p| vec3(p.position)).collect(),
+            v: self.particles.iter().map(|p| if p.pinned { [0.0; 3] } else { p.velocity }).map(vec3).collect(),
+        }
+    }
+
+    /// Validates and builds the model and its initial state.
+    pub fn build(&self) -> Result<(ParticleModel, ParticleState), SceneError> {
+        self.validate()?;
+        let state = self.initial_state();
+        let mut model = ParticleModel::new(self.particles.iter().map(|p| sc(p.mass)).collect());
+        for (i, p) in self.particles.iter().enumerate() {
+            if p.pinned {
+                model.pin(i, vec3(p.position));
+            }
+        }
+        for m in &self.motions {
+            model.prescribe(m.particle, m.motion);
+        }
+        for (k, s) in self.springs.iter().enumerate() {
+            model.springs.push(s.a, s.b, sc(self.rest_length(k)), sc(s.stiffness), sc(s.damping), s.law);
+        }
+        model.gravity = vec3(self.gravity);
+        model.drag = sc(self.drag);
+        model.set_wind(self.wind);
+        for f in &self.forces {
+            model.set_external_force(f.particle, vec3(f.force));
+        }
+        model.colliders = self.colliders.iter().map(Collider::from_desc).collect();
+        model.validate().map_err(|e| SceneError { errors: vec![FieldError { path: "model".into(), message: e.to_string() }] })?;
+        Ok((model, state))
+    }
+}

@@ -1,0 +1,43 @@
+//! # bevy_soft_body
+//!
+//! Soft-body physics for Bevy: cloth, ropes, jelly and elastic solids advanced by
+//! interchangeable, measured time integrators.
+//!
+//! The crate has two layers:
+//! - [`core`]: the numerics, without Bevy — the ODE abstraction ([`core::ode`]), the
+//!   integrators ([`core::integrate`]), the particle model and its forces, collisions, scene
+//!   layouts ([`core::scene`], [`core::build`]) and the headless driver ([`core::driver`]).
+//! - the Bevy face (feature `plugin`, on by default).
+//!
+//! Layout is not driver: what a scene contains is described apart from how it is advanced,
+//! so switching from RK4 to symplectic Euler is one [`IntegratorKind`] value.
+//!
+//! ```
+//! use bevy_soft_body::prelude::*;
+//!
+//! let scene = build::chain(&build::ChainParams::default()).unwrap();
+//! let (model, state) = scene.build().unwrap();
+//! let config = DriverConfig { integrator: "r".parse().unwrap(), ..Default::default() };
+//! let mut sim = Simulation::new(model, state, config);
+//! sim.run_until(1.0).unwrap();
+//! assert!(sim.state.x[3].y < 0.0); // the chain swung down
+//! ```
+
+pub mod core;
+pub mod math;
+
+/// The names most programs need.
+pub mod prelude {
+    pub use crate::core::build;
+    pub use crate::core::collide::{Collider, ColliderDesc, ContactMaterial, ShapeDesc};
+    pub use crate::core::driver::{Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy};
+    pub use crate::core::forces::{SpringLaw, Wind};
+    pub use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, StepError};
+    pub use crate::core::motion::Motion;
+    pub use crate::core::ode::{CircleSystem, Energy, OdeState, OdeSystem, ParticleState};
+    pub use crate::core::particles::ParticleModel;
+    pub use crate::core::scene::{Scene, SceneError};
+    pub use crate::math::{PRECISION, Scalar, Vector};
+}
+
+pub use crate::core::integrate::IntegratorKind;

@@ -1,0 +1,308 @@
+//! The particle model against mechanics: oscillator and pendulum periods, energy behaviour of
+//! symplectic and forward Euler, momentum conservation of internal forces, gravity and drag
+//! against closed forms, prescribed motion.
+
+use bevy_soft_body::core::integrate::{AdaptiveConfig, Integrator};
+use bevy_soft_body::core::scene::{ParticleDesc, SpringDesc};
+use bevy_soft_body::prelude::*;
+
+const F64: bool = cfg!(feature = "f64");
+
+fn p(position: [f64; 3], mass: f64, pinned: bool) -> ParticleDesc {
+    ParticleDesc { position, velocity: [0.0; 3], mass, pinned }
+}
+
+fn hooke(a: usize, b: usize, k: f64, rest: f64) -> SpringDesc {
+    SpringDesc { a, b, stiffness: k, damping: 0.0, rest_length: Some(rest), law: SpringLaw::Hooke, kind: Default::default() }
+}
+
+/// Times of upward zero crossings of `signal`, linearly interpolated.
+fn crossings(samples: &[(f64, f64)]) -> Vec<f64> {
+    samples
+        .windows(2)
+        .filter(|w| w[0].1 < 0.0 && w[1].1 >= 0.0)
+        .map(|w| w[0].0 + (w[1].0 - w[0].0) * (-w[0].1) / (w[1].1 - w[0].1))
+        .collect()
+}
+
+fn mean_period(c: &[f64]) -> f64 {
+    (c[c.len() - 1] - c[0]) / (c.len() - 1) as f64
+}
+
+#[test]
+fn spring_mass_period_within_0_1_percent() {
+    // m = 0.5 kg on k = 200 N/m from a fixed anchor, no gravity: T = 2π√(m/k) = 0.31416 s.
+    let (m, k) = (0.5, 200.0);
+    let mut s = Scene::default();
+    s.particles.push(p([0.0; 3], 0.0, true));
+    s.particles.push(p([1.1, 0.0, 0.0], m, false));
+    s.springs.push(hooke(0, 1, k, 1.0));
+    let (model, state) = s.build().unwrap();
+    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = IntegratorKind::Rk4.build(AdaptiveConfig::default());
+    let mut st = state;
+    let h = 1e-4;
+    let mut samples = Vec::new();
+    for n in 0..20000 {
+        integ.step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut st).unwrap();
+        samples.push(((n + 1) as f64 * h, st.x[1].x as f64 - 1.0));
+    }
+    let c = crossings(&samples);
+    assert!(c.len() >= 5);
+    let t = mean_period(&c);
+    let theory = std::f64::consts::TAU * (m / k).sqrt();
+    let rel = (t - theory).abs() / theory;
+    println!("period {t} vs {theory}: {rel:e}");
+    assert!(rel < 1e-3, "period {t}, theory {theory}");
+}
+
+#[test]
+fn pendulum_small_angle_period_within_0_5_percent() {
+    // A stiff spring (k = 1e4 N/m, ω_spring = 100 rad/s ≫ √(g/L) = 3.13 rad/s) makes the
+    // particle a pendulum of length L = 1 m; at 0.05 rad the finite-amplitude correction is
+    // 1 + θ²/16 ≈ 1.0002, far inside the 0.5 % band.
+    let (l, m, k) = (1.0, 1.0, 1e4);
+    let scene = build::pendulum(l, m, k, 0.05);
+    let (model, state) = scene.build().unwrap();
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::Rk4,
+        policy: StepPolicy::Fixed { h: 1e-3 },
+        frame_dt: 1e-2,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(model, state, cfg);
+    let mut samples = Vec::new();
+    sim.run(1000, |s, _| samples.push((s.time as f64, s.state.x[1].x as f64))).unwrap();
+    let c = crossings(&samples);
+    assert!(c.len() >= 4, "{} crossings", c.len());
+    let t = mean_period(&c);
+    let theory = std::f64::consts::TAU * (l / build::G).sqrt();
+    let rel = (t - theory).abs() / theory;
+    println!("pendulum period {t} vs {theory}: {rel:e}");
+    assert!(rel < 5e-3);
+}
+
+fn chain_energy_run(kind: IntegratorKind, steps: usize, h: f64) -> (Vec<f64>, f64) {
+    // Undamped 4-particle chain (no drag, no dampers) released horizontally under gravity.
+    let params = build::ChainParams { drag: 0.0, damping: 0.0, ..Default::default() };
+    let (model, mut state) = build::chain(&params).unwrap().build().unwrap();
+    // Energy exchanged in the swing: total mass × g × chain length.
+    let scale = 3.0 * params.mass * build::G * 3.0 * params.link;
+    let e0 = model.energy(0.0, &state).unwrap().total() as f64;
+    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = kind.build(AdaptiveConfig::default());
+    let mut errs = Vec::with_capacity(steps / 100);
+    for n in 0..steps {
+        integ.step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut state).unwrap();
+        if n % 100 == 0 {
+            let e = model.energy(0.0, &state).unwrap().total() as f64;
+            errs.push((e - e0).abs() / scale);
+        }
+    }
+    (errs, scale)
+}
+
+#[test]
+fn symplectic_euler_energy_bounded_over_1e5_steps_forward_euler_grows() {
+    // Fastest mode: ω ≈ √(4k/m) ≈ 89 rad/s, so h = 2.5e-4 gives hω ≈ 0.02 < 2 (symplectic
+    // Euler's bound). Its energy error oscillates with an amplitude O(h) (1.7 % at h = 1e-3,
+    // measured) and does not drift; forward Euler's grows without bound.
+    let (se, _) = chain_energy_run(IntegratorKind::SymplecticEuler, 100_000, 2.5e-4);
+    let max_se = se.iter().cloned().fold(0.0, f64::max);
+    println!("symplectic Euler: max relative energy error {max_se:e}");
+    assert!(max_se < 0.01, "symplectic Euler energy error {max_se}");
+    // Its error does not drift: the chain is chaotic, so the error's amplitude depends on the
+    // configuration, but the second half is of the same size as the first (forward Euler's
+    // grows by orders of magnitude over the same span).
+    let half = se.len() / 2;
+    let first = se[..half].iter().cloned().fold(0.0, f64::max);
+    let last = se[half..].iter().cloned().fold(0.0, f64::max);
+    println!("symplectic Euler: first half {first:e}, second half {last:e}");
+    assert!(last < 3.0 * first, "drift: first {first}, last {last}");
+
+    let (fe, _) = chain_energy_run(IntegratorKind::ForwardEuler, 20_000, 1e-3);
+    let fe_first = fe[..fe.len() / 4].iter().cloned().fold(0.0, f64::max);
+    let fe_last = fe[3 * fe.len() / 4..].iter().cloned().fold(0.0, f64::max);
+    println!("forward Euler: energy error {fe_first:e} (first quarter) -> {fe_last:e} (last quarter)");
+    assert!(fe_last > 2.0 * fe_first && fe_last > 10.0 * max_se, "forward Euler's energy must grow");
+}
+
+fn lcg(state: &mut u64) -> f64 {
+    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    (*state >> 11) as f64 / (1u64 << 53) as f64
+}
+
+#[test]
+fn springs_and_dampers_conserve_linear_momentum() {
+    // Internal forces come in equal and opposite pairs, so Σ m v is constant with no gravity,
+    // drag or pins, for every integrator (each is a linear combination of derivative
+    // evaluations, each of which has zero net force).
+    let mut rng = 7u64;
+    let mut s = Scene::default();
+    for _ in 0..30 {
+        let mut q = p([lcg(&mut rng), lcg(&mut rng), lcg(&mut rng)], 0.1 + lcg(&mut rng), false);
+        q.velocity = [lcg(&mut rng) - 0.5, lcg(&mut rng) - 0.5, lcg(&mut rng) - 0.5];
+        s.particles.push(q);
+    }
+    for k in 0..80 {
+        let a = (lcg(&mut rng) * 30.0) as usize;
+        let b = (a + 1 + (lcg(&mut rng) * 29.0) as usize) % 30;
+        let mut sp = hooke(a, b, 50.0 + 100.0 * lcg(&mut rng), 0.3 + 0.5 * lcg(&mut rng));
+        sp.damping = 0.5 * lcg(&mut rng);
+        sp.law = if k % 2 == 0 { SpringLaw::Hooke } else { SpringLaw::Strain };
+        s.springs.push(sp);
+    }
+    let (model, state0) = s.build().unwrap();
+    let momentum = |st: &ParticleState| -> [f64; 3] {
+        let mut m = [0.0; 3];
+        for (mi, v) in model.mass().iter().zip(&st.v) {
+            m[0] += *mi as f64 * v.x as f64;
+            m[1] += *mi as f64 * v.y as f64;
+            m[2] += *mi as f64 * v.z as f64;
+        }
+        m
+    };
+    let p0 = momentum(&state0);
+    let scale: f64 = model.mass().iter().zip(&state0.v).map(|(m, v)| *m as f64 * v.length() as f64).sum();
+    for kind in IntegratorKind::ALL {
+        let mut st = state0.clone();
+        let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = kind.build(AdaptiveConfig::default());
+        let mut t: Scalar = 0.0;
+        for _ in 0..500 {
+            t += integ.step(&model, t, 1e-3, &mut st).unwrap();
+        }
+        let p1 = momentum(&st);
+        let drift = (0..3).map(|c| (p1[c] - p0[c]).abs()).fold(0.0, f64::max) / scale;
+        // Round-off: 500 steps × 80 springs × a few ulps.
+        let tol = if F64 { 1e-12 } else { 1e-4 };
+        println!("{kind}: relative momentum drift {drift:e}");
+        assert!(drift < tol, "{kind}: momentum drift {drift:e}");
+    }
+}
+
+#[test]
+fn free_fall_with_drag_matches_closed_form() {
+    // m v' = m g − c v: v(t) = v∞ (1 − e^{−t c/m}), v∞ = m g / c.
+    let (m, c) = (0.2, 0.5);
+    let mut s = Scene { gravity: [0.0, -build::G, 0.0], drag: c, ..Default::default() };
+    s.particles.push(p([0.0; 3], m, false));
+    let (model, state) = s.build().unwrap();
+    let cfg = DriverConfig { integrator: IntegratorKind::Rk4, policy: StepPolicy::Fixed { h: 1e-3 }, frame_dt: 0.1, ..Default::default() };
+    let mut sim = Simulation::new(model, state, cfg);
+    sim.run_until(2.0).unwrap();
+    let t = sim.time as f64;
+    let vinf = m * build::G / c;
+    let v = -vinf * (1.0 - (-t * c / m).exp());
+    let y = -vinf * (t - m / c * (1.0 - (-t * c / m).exp()));
+    let tol = if F64 { 1e-9 } else { 1e-4 };
+    assert!((sim.state.v[0].y as f64 - v).abs() < tol * vinf, "{} vs {v}", sim.state.v[0].y);
+    assert!((sim.state.x[0].y as f64 - y).abs() < tol * vinf * t, "{} vs {y}", sim.state.x[0].y);
+}
+
+#[test]
+fn pinned_particles_never_move_and_prescribed_ones_follow_their_path() {
+    let scene = build::wire(11, 0.05, 100).unwrap();
+    let (model, state) = scene.build().unwrap();
+    let motion = scene.motions[0].motion;
+    for kind in IntegratorKind::ALL {
+        let cfg = DriverConfig { integrator: kind, policy: StepPolicy::Fixed { h: 2e-3 }, frame_dt: 0.05, ..Default::default() };
+        let mut sim = Simulation::new(model.clone(), state.clone(), cfg);
+        sim.run(40, |s, _| {
+            let (x, v, _) = motion.eval(s.time);
+            assert_eq!(s.state.x[0], x, "{kind}: endpoint position at t = {}", s.time);
+            assert_eq!(s.state.v[0], v);
+        })
+        .unwrap();
+    }
+    // A pinned chain end stays exactly where it was.
+    let (model, state) = build::chain(&build::ChainParams::default()).unwrap().build().unwrap();
+    let x0 = state.x[0];
+    let mut sim = Simulation::new(model, state, DriverConfig::default());
+    sim.run(120, |s, _| assert_eq!(s.state.x[0], x0)).unwrap();
+}
+
+#[test]
+fn wire_endpoint_motion_is_the_slides_circle() {
+    // X(1) = (0.5 sin ωt, 0, 0.5 cos ωt), V(1) = (0.5 ω cos ωt, 0, −0.5 ω sin ωt), ω = 2π/5.
+    let m = Motion::physbam_wire_endpoint(5.0);
+    let w = std::f64::consts::TAU / 5.0;
+    for t in [0.0, 0.3, 1.7, 4.9] {
+        let (x, v, a) = m.eval(t as Scalar);
+        let ex = [0.5 * (w * t).sin(), 0.0, 0.5 * (w * t).cos()];
+        let ev = [0.5 * w * (w * t).cos(), 0.0, -0.5 * w * (w * t).sin()];
+        let tol = if F64 { 1e-12 } else { 1e-6 };
+        for c in 0..3 {
+            assert!((x[c] as f64 - ex[c]).abs() < tol);
+            assert!((v[c] as f64 - ev[c]).abs() < tol);
+            assert!((a[c] as f64 + w * w * ex[c]).abs() < tol * 10.0);
+        }
+    }
+}
+
+#[test]
+fn wind_is_deterministic_and_pushes_downwind() {
+    let w = Wind { velocity: [2.0, 0.0, 0.0], gust: 0.5, frequency: 1.0, coefficient: 0.1, seed: 42, enabled: true };
+    let f1 = w.field();
+    let f2 = w.field();
+    for t in [0.0, 0.5, 3.3] {
+        assert_eq!(f1.velocity(t), f2.velocity(t), "same seed, same breeze");
+    }
+    let other = Wind { seed: 43, ..w }.field();
+    assert_ne!(f1.velocity(0.5), other.velocity(0.5));
+    // A free particle at rest drifts with the mean wind (no gravity).
+    let mut s = Scene { wind: Some(w), ..Default::default() };
+    s.particles.push(p([0.0; 3], 0.05, false));
+    let (model, state) = s.build().unwrap();
+    let mut sim = Simulation::new(model, state, DriverConfig::default());
+    sim.run_until(5.0).unwrap();
+    assert!(sim.state.v[0].x > 1.0, "pushed downwind: {}", sim.state.v[0].x);
+    // Disabled wind costs nothing and does nothing.
+    let mut s2 = s.clone();
+    s2.wind = Some(Wind { enabled: false, ..w });
+    let (model2, _) = s2.build().unwrap();
+    assert!(model2.wind().is_none());
+}
+
+#[test]
+fn strain_law_is_hooke_with_k_over_rest_length() {
+    // f = −k (l/L − 1) n has magnitude k/L · (l − L): the same as Hooke with stiffness k/L.
+    let mk = |law| {
+        let mut s = Scene::default();
+        s.particles.push(p([0.0; 3], 1.0, false));
+        s.particles.push(p([0.7, 0.0, 0.0], 1.0, false));
+        let mut sp = hooke(0, 1, 10.0, 0.5);
+        sp.law = law;
+        s.springs.push(sp);
+        let (m, st) = s.build().unwrap();
+        let mut d = st.clone();
+        m.derivative(0.0, &st, &mut d);
+        d.v[0].x as f64
+    };
+    let hooke_a = mk(SpringLaw::Hooke);
+    let strain_a = mk(SpringLaw::Strain);
+    let tol = if F64 { 1e-12 } else { 1e-6 };
+    assert!((hooke_a - 10.0 * 0.2).abs() < tol, "Hooke: k (l − L) = 2 N");
+    assert!((strain_a - 10.0 * (0.7 / 0.5 - 1.0)).abs() < tol, "strain: k (l/L − 1) = 4 N");
+}
+
+#[test]
+fn ground_bounce_reaches_e_squared_height() {
+    // Dropped from h0 = 1 m onto a plane with restitution e = 0.8: it rebounds to e² h0.
+    let mut s = Scene { gravity: [0.0, -build::G, 0.0], ..Default::default() };
+    s.particles.push(p([0.0, 1.0, 0.0], 0.1, false));
+    s.colliders.push(build::ground(0.0, 0.8, 0.0));
+    let (model, state) = s.build().unwrap();
+    let cfg = DriverConfig { integrator: IntegratorKind::Rk4, policy: StepPolicy::Fixed { h: 1e-4 }, frame_dt: 1e-3, ..Default::default() };
+    let mut sim = Simulation::new(model, state, cfg);
+    let mut bounced = false;
+    let mut apex: f64 = 0.0;
+    sim.run(1500, |s, _| {
+        if s.state.v[0].y > 0.0 {
+            bounced = true;
+        }
+        if bounced {
+            apex = apex.max(s.state.x[0].y as f64);
+        }
+    })
+    .unwrap();
+    println!("rebound apex {apex} vs {}", 0.64);
+    assert!((apex - 0.64).abs() < 0.02 * 0.64, "apex {apex}");
+}
