@@ -30,7 +30,9 @@ pub mod math;
 pub mod prelude {
     pub use crate::core::build;
     pub use crate::core::collide::{Collider, ColliderDesc, ContactMaterial, ShapeDesc};
-    pub use crate::core::driver::{Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy};
+    pub use crate::core::driver::{
+        Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
+    };
     pub use crate::core::forces::{SpringLaw, Wind};
     pub use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, StepError};
     pub use crate::core::motion::Motion;

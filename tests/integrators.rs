@@ -12,7 +12,13 @@ use bevy_soft_body::prelude::*;
 
 const F64: bool = cfg!(feature = "f64");
 
-fn integrate<S: OdeState, Sys: OdeSystem<S>>(kind: IntegratorKind, sys: &Sys, x0: &S, h: f64, n: usize) -> S {
+fn integrate<S: OdeState, Sys: OdeSystem<S>>(
+    kind: IntegratorKind,
+    sys: &Sys,
+    x0: &S,
+    h: f64,
+    n: usize,
+) -> S {
     let mut integ: Box<dyn Integrator<S, Sys>> = kind.build(AdaptiveConfig::default());
     let mut x = x0.clone();
     let mut t: Scalar = 0.0;
@@ -49,7 +55,11 @@ fn forward_euler_radius_grows_exactly_as_sqrt_1_plus_h2_per_step() {
         let expected = (1.0 + h * h).powf(n as f64 / 2.0);
         // Round-off: n steps of a few ulps each.
         let tol = if F64 { 1e-12 } else { 2e-6 } * n as f64;
-        assert!((radius(x) - expected).abs() <= tol * expected, "h={h}: radius {} vs {expected}", radius(x));
+        assert!(
+            (radius(x) - expected).abs() <= tol * expected,
+            "h={h}: radius {} vs {expected}",
+            radius(x)
+        );
         assert!(radius(x) > 1.0, "Euler spirals outward");
     }
 }
@@ -62,9 +72,16 @@ fn trapezoid_radius_grows_slower_as_its_amplification_factor_predicts() {
         let x = integrate(IntegratorKind::Trapezoid, &CircleSystem, &x0, h, n);
         let expected = (1.0 + h.powi(4) / 4.0).powf(n as f64 / 2.0);
         let tol = if F64 { 1e-12 } else { 2e-6 } * n as f64;
-        assert!((radius(x) - expected).abs() <= tol * expected, "h={h}: radius {} vs {expected}", radius(x));
+        assert!(
+            (radius(x) - expected).abs() <= tol * expected,
+            "h={h}: radius {} vs {expected}",
+            radius(x)
+        );
         let euler = integrate(IntegratorKind::ForwardEuler, &CircleSystem, &x0, h, n);
-        assert!(radius(x) > 1.0 && radius(x) < radius(euler), "trapezoid grows, but slower than Euler");
+        assert!(
+            radius(x) > 1.0 && radius(x) < radius(euler),
+            "trapezoid grows, but slower than Euler"
+        );
     }
 }
 
@@ -75,12 +92,21 @@ fn rk4_one_revolution_at_h_001() {
     // is round-off, ≈ 628 steps × 1e-7.
     let n = 628;
     let h = std::f64::consts::TAU / n as f64;
-    let x = integrate(IntegratorKind::Rk4, &CircleSystem, &Vector::new(1.0, 0.0, 0.0), h, n);
+    let x = integrate(
+        IntegratorKind::Rk4,
+        &CircleSystem,
+        &Vector::new(1.0, 0.0, 0.0),
+        h,
+        n,
+    );
     let err = (radius(x) - 1.0).abs();
     let bound = if F64 { 1e-8 } else { 1e-4 };
     assert!(err < bound, "radius error {err:e}");
     let pos_err = ((x.x as f64 - 1.0).powi(2) + (x.y as f64).powi(2)).sqrt();
-    assert!(pos_err < if F64 { 1e-8 } else { 1e-4 }, "position error after one revolution {pos_err:e}");
+    assert!(
+        pos_err < if F64 { 1e-8 } else { 1e-4 },
+        "position error after one revolution {pos_err:e}"
+    );
 }
 
 fn circle_error(kind: IntegratorKind, h: f64, t_end: f64) -> f64 {
@@ -111,12 +137,21 @@ fn sweep(order: u32) -> Vec<f64> {
 
 #[test]
 fn convergence_orders_on_the_circle() {
-    for kind in [IntegratorKind::ForwardEuler, IntegratorKind::Trapezoid, IntegratorKind::Midpoint, IntegratorKind::Rk4] {
+    for kind in [
+        IntegratorKind::ForwardEuler,
+        IntegratorKind::Trapezoid,
+        IntegratorKind::Midpoint,
+        IntegratorKind::Rk4,
+    ] {
         let hs = sweep(kind.order());
         let errs: Vec<f64> = hs.iter().map(|&h| circle_error(kind, h, 1.6)).collect();
         let p = slope(&hs, &errs);
         println!("{kind}: errors {errs:?} -> order {p:.3}");
-        assert!((p - kind.order() as f64).abs() <= 0.15, "{kind}: measured order {p:.3}, theory {}", kind.order());
+        assert!(
+            (p - kind.order() as f64).abs() <= 0.15,
+            "{kind}: measured order {p:.3}, theory {}",
+            kind.order()
+        );
     }
 }
 
@@ -131,7 +166,10 @@ fn oscillator() -> impl OdeSystem<ParticleState> {
 fn oscillator_error(kind: IntegratorKind, h: f64, t_end: f64) -> f64 {
     let n = (t_end / h).round() as usize;
     let t = n as f64 * h;
-    let x0 = ParticleState { x: vec![Vector::new(1.0, 0.0, 0.0)], v: vec![Vector::ZERO] };
+    let x0 = ParticleState {
+        x: vec![Vector::new(1.0, 0.0, 0.0)],
+        v: vec![Vector::ZERO],
+    };
     let s = integrate(kind, &oscillator(), &x0, h, n);
     let (xe, ve) = ((2.0 * t).cos(), -2.0 * (2.0 * t).sin());
     ((s.x[0].x as f64 - xe).powi(2) + (s.v[0].x as f64 - ve).powi(2)).sqrt()
@@ -150,16 +188,24 @@ fn convergence_orders_on_the_harmonic_oscillator() {
         let errs: Vec<f64> = hs.iter().map(|&h| oscillator_error(kind, h, 1.0)).collect();
         let p = slope(&hs, &errs);
         println!("{kind}: errors {errs:?} -> order {p:.3}");
-        assert!((p - kind.order() as f64).abs() <= 0.15, "{kind}: measured order {p:.3}, theory {}", kind.order());
+        assert!(
+            (p - kind.order() as f64).abs() <= 0.15,
+            "{kind}: measured order {p:.3}, theory {}",
+            kind.order()
+        );
     }
 }
 
 #[test]
 fn symplectic_euler_refuses_first_order_states() {
-    let mut integ: Box<dyn Integrator<Vector, CircleSystem>> = IntegratorKind::SymplecticEuler.build(AdaptiveConfig::default());
+    let mut integ: Box<dyn Integrator<Vector, CircleSystem>> =
+        IntegratorKind::SymplecticEuler.build(AdaptiveConfig::default());
     let mut x = Vector::X;
     let r = integ.step(&CircleSystem, 0.0, 0.1, &mut x);
-    assert_eq!(r, Err(StepError::NeedsSecondOrder(IntegratorKind::SymplecticEuler)));
+    assert_eq!(
+        r,
+        Err(StepError::NeedsSecondOrder(IntegratorKind::SymplecticEuler))
+    );
     assert_eq!(x, Vector::X, "state unchanged on error");
 }
 
@@ -170,9 +216,16 @@ fn bad_step_sizes_are_errors_not_panics() {
             if kind == IntegratorKind::SymplecticEuler {
                 continue;
             }
-            let mut integ: Box<dyn Integrator<Vector, CircleSystem>> = kind.build(AdaptiveConfig::default());
+            let mut integ: Box<dyn Integrator<Vector, CircleSystem>> =
+                kind.build(AdaptiveConfig::default());
             let mut x = Vector::X;
-            assert!(matches!(integ.step(&CircleSystem, 0.0, h, &mut x), Err(StepError::BadStepSize(_))), "{kind} h={h}");
+            assert!(
+                matches!(
+                    integ.step(&CircleSystem, 0.0, h, &mut x),
+                    Err(StepError::BadStepSize(_))
+                ),
+                "{kind} h={h}"
+            );
             assert_eq!(x, Vector::X);
         }
     }
@@ -180,7 +233,11 @@ fn bad_step_sizes_are_errors_not_panics() {
 
 /// Runs RK45 to `t_end` (steps capped to land on it) and returns the error and the counters.
 fn rk45_circle(tol: f64, t_end: f64) -> (f64, bevy_soft_body::core::integrate::IntegratorStats) {
-    let cfg = AdaptiveConfig { rtol: tol, atol: tol, ..Default::default() };
+    let cfg = AdaptiveConfig {
+        rtol: tol,
+        atol: tol,
+        ..Default::default()
+    };
     let mut integ: Box<dyn Integrator<Vector, CircleSystem>> = IntegratorKind::Rk45.build(cfg);
     let x0 = Vector::new(1.0, 0.0, 0.0);
     let mut x = x0;
@@ -192,7 +249,10 @@ fn rk45_circle(tol: f64, t_end: f64) -> (f64, bevy_soft_body::core::integrate::I
         t = if taken >= cap { te } else { t + taken };
     }
     assert_eq!(t, te, "lands exactly on the end time");
-    ((x - CircleSystem::exact(x0, te)).length() as f64, integ.stats())
+    (
+        (x - CircleSystem::exact(x0, te)).length() as f64,
+        integ.stats(),
+    )
 }
 
 #[test]
@@ -200,12 +260,19 @@ fn rk45_error_follows_its_tolerance() {
     // A step-controlled method keeps the local error per step below tol, so the global error
     // over a fixed interval scales like tol (slope ≈ 1 in log-log; DOPRI5's local
     // extrapolation makes it slightly flatter), and stays within a modest multiple of tol.
-    let tols: Vec<f64> = if F64 { vec![1e-4, 1e-6, 1e-8, 1e-10] } else { vec![1e-2, 1e-3, 1e-4, 1e-5] };
+    let tols: Vec<f64> = if F64 {
+        vec![1e-4, 1e-6, 1e-8, 1e-10]
+    } else {
+        vec![1e-2, 1e-3, 1e-4, 1e-5]
+    };
     let mut errs = Vec::new();
     let mut evals = Vec::new();
     for &tol in &tols {
         let (e, st) = rk45_circle(tol, 10.0);
-        println!("tol {tol:e}: error {e:e}, steps {}, rejected {}, evaluations {}", st.steps, st.rejected, st.evaluations);
+        println!(
+            "tol {tol:e}: error {e:e}, steps {}, rejected {}, evaluations {}",
+            st.steps, st.rejected, st.evaluations
+        );
         assert!(e < 50.0 * tol, "error {e:e} at tol {tol:e}");
         errs.push(e);
         evals.push(st.evaluations as f64);

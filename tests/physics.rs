@@ -9,11 +9,24 @@ use bevy_soft_body::prelude::*;
 const F64: bool = cfg!(feature = "f64");
 
 fn p(position: [f64; 3], mass: f64, pinned: bool) -> ParticleDesc {
-    ParticleDesc { position, velocity: [0.0; 3], mass, pinned }
+    ParticleDesc {
+        position,
+        velocity: [0.0; 3],
+        mass,
+        pinned,
+    }
 }
 
 fn hooke(a: usize, b: usize, k: f64, rest: f64) -> SpringDesc {
-    SpringDesc { a, b, stiffness: k, damping: 0.0, rest_length: Some(rest), law: SpringLaw::Hooke, kind: Default::default() }
+    SpringDesc {
+        a,
+        b,
+        stiffness: k,
+        damping: 0.0,
+        rest_length: Some(rest),
+        law: SpringLaw::Hooke,
+        kind: Default::default(),
+    }
 }
 
 /// Times of upward zero crossings of `signal`, linearly interpolated.
@@ -38,12 +51,15 @@ fn spring_mass_period_within_0_1_percent() {
     s.particles.push(p([1.1, 0.0, 0.0], m, false));
     s.springs.push(hooke(0, 1, k, 1.0));
     let (model, state) = s.build().unwrap();
-    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = IntegratorKind::Rk4.build(AdaptiveConfig::default());
+    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> =
+        IntegratorKind::Rk4.build(AdaptiveConfig::default());
     let mut st = state;
     let h = 1e-4;
     let mut samples = Vec::new();
     for n in 0..20000 {
-        integ.step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut st).unwrap();
+        integ
+            .step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut st)
+            .unwrap();
         samples.push(((n + 1) as f64 * h, st.x[1].x as f64 - 1.0));
     }
     let c = crossings(&samples);
@@ -71,7 +87,10 @@ fn pendulum_small_angle_period_within_0_5_percent() {
     };
     let mut sim = Simulation::new(model, state, cfg);
     let mut samples = Vec::new();
-    sim.run(1000, |s, _| samples.push((s.time as f64, s.state.x[1].x as f64))).unwrap();
+    sim.run(1000, |s, _| {
+        samples.push((s.time as f64, s.state.x[1].x as f64))
+    })
+    .unwrap();
     let c = crossings(&samples);
     assert!(c.len() >= 4, "{} crossings", c.len());
     let t = mean_period(&c);
@@ -83,15 +102,22 @@ fn pendulum_small_angle_period_within_0_5_percent() {
 
 fn chain_energy_run(kind: IntegratorKind, steps: usize, h: f64) -> (Vec<f64>, f64) {
     // Undamped 4-particle chain (no drag, no dampers) released horizontally under gravity.
-    let params = build::ChainParams { drag: 0.0, damping: 0.0, ..Default::default() };
+    let params = build::ChainParams {
+        drag: 0.0,
+        damping: 0.0,
+        ..Default::default()
+    };
     let (model, mut state) = build::chain(&params).unwrap().build().unwrap();
     // Energy exchanged in the swing: total mass × g × chain length.
     let scale = 3.0 * params.mass * build::G * 3.0 * params.link;
     let e0 = model.energy(0.0, &state).unwrap().total() as f64;
-    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = kind.build(AdaptiveConfig::default());
+    let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> =
+        kind.build(AdaptiveConfig::default());
     let mut errs = Vec::with_capacity(steps / 100);
     for n in 0..steps {
-        integ.step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut state).unwrap();
+        integ
+            .step(&model, (n as f64 * h) as Scalar, h as Scalar, &mut state)
+            .unwrap();
         if n % 100 == 0 {
             let e = model.energy(0.0, &state).unwrap().total() as f64;
             errs.push((e - e0).abs() / scale);
@@ -121,12 +147,19 @@ fn symplectic_euler_energy_bounded_over_1e5_steps_forward_euler_grows() {
     let (fe, _) = chain_energy_run(IntegratorKind::ForwardEuler, 20_000, 1e-3);
     let fe_first = fe[..fe.len() / 4].iter().cloned().fold(0.0, f64::max);
     let fe_last = fe[3 * fe.len() / 4..].iter().cloned().fold(0.0, f64::max);
-    println!("forward Euler: energy error {fe_first:e} (first quarter) -> {fe_last:e} (last quarter)");
-    assert!(fe_last > 2.0 * fe_first && fe_last > 10.0 * max_se, "forward Euler's energy must grow");
+    println!(
+        "forward Euler: energy error {fe_first:e} (first quarter) -> {fe_last:e} (last quarter)"
+    );
+    assert!(
+        fe_last > 2.0 * fe_first && fe_last > 10.0 * max_se,
+        "forward Euler's energy must grow"
+    );
 }
 
 fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     (*state >> 11) as f64 / (1u64 << 53) as f64
 }
 
@@ -138,16 +171,33 @@ fn springs_and_dampers_conserve_linear_momentum() {
     let mut rng = 7u64;
     let mut s = Scene::default();
     for _ in 0..30 {
-        let mut q = p([lcg(&mut rng), lcg(&mut rng), lcg(&mut rng)], 0.1 + lcg(&mut rng), false);
-        q.velocity = [lcg(&mut rng) - 0.5, lcg(&mut rng) - 0.5, lcg(&mut rng) - 0.5];
+        let mut q = p(
+            [lcg(&mut rng), lcg(&mut rng), lcg(&mut rng)],
+            0.1 + lcg(&mut rng),
+            false,
+        );
+        q.velocity = [
+            lcg(&mut rng) - 0.5,
+            lcg(&mut rng) - 0.5,
+            lcg(&mut rng) - 0.5,
+        ];
         s.particles.push(q);
     }
     for k in 0..80 {
         let a = (lcg(&mut rng) * 30.0) as usize;
         let b = (a + 1 + (lcg(&mut rng) * 29.0) as usize) % 30;
-        let mut sp = hooke(a, b, 50.0 + 100.0 * lcg(&mut rng), 0.3 + 0.5 * lcg(&mut rng));
+        let mut sp = hooke(
+            a,
+            b,
+            50.0 + 100.0 * lcg(&mut rng),
+            0.3 + 0.5 * lcg(&mut rng),
+        );
         sp.damping = 0.5 * lcg(&mut rng);
-        sp.law = if k % 2 == 0 { SpringLaw::Hooke } else { SpringLaw::Strain };
+        sp.law = if k % 2 == 0 {
+            SpringLaw::Hooke
+        } else {
+            SpringLaw::Strain
+        };
         s.springs.push(sp);
     }
     let (model, state0) = s.build().unwrap();
@@ -161,10 +211,16 @@ fn springs_and_dampers_conserve_linear_momentum() {
         m
     };
     let p0 = momentum(&state0);
-    let scale: f64 = model.mass().iter().zip(&state0.v).map(|(m, v)| *m as f64 * v.length() as f64).sum();
+    let scale: f64 = model
+        .mass()
+        .iter()
+        .zip(&state0.v)
+        .map(|(m, v)| *m as f64 * v.length() as f64)
+        .sum();
     for kind in IntegratorKind::ALL {
         let mut st = state0.clone();
-        let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> = kind.build(AdaptiveConfig::default());
+        let mut integ: Box<dyn Integrator<ParticleState, ParticleModel>> =
+            kind.build(AdaptiveConfig::default());
         let mut t: Scalar = 0.0;
         for _ in 0..500 {
             t += integ.step(&model, t, 1e-3, &mut st).unwrap();
@@ -182,10 +238,19 @@ fn springs_and_dampers_conserve_linear_momentum() {
 fn free_fall_with_drag_matches_closed_form() {
     // m v' = m g − c v: v(t) = v∞ (1 − e^{−t c/m}), v∞ = m g / c.
     let (m, c) = (0.2, 0.5);
-    let mut s = Scene { gravity: [0.0, -build::G, 0.0], drag: c, ..Default::default() };
+    let mut s = Scene {
+        gravity: [0.0, -build::G, 0.0],
+        drag: c,
+        ..Default::default()
+    };
     s.particles.push(p([0.0; 3], m, false));
     let (model, state) = s.build().unwrap();
-    let cfg = DriverConfig { integrator: IntegratorKind::Rk4, policy: StepPolicy::Fixed { h: 1e-3 }, frame_dt: 0.1, ..Default::default() };
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::Rk4,
+        policy: StepPolicy::Fixed { h: 1e-3 },
+        frame_dt: 0.1,
+        ..Default::default()
+    };
     let mut sim = Simulation::new(model, state, cfg);
     sim.run_until(2.0).unwrap();
     let t = sim.time as f64;
@@ -193,8 +258,16 @@ fn free_fall_with_drag_matches_closed_form() {
     let v = -vinf * (1.0 - (-t * c / m).exp());
     let y = -vinf * (t - m / c * (1.0 - (-t * c / m).exp()));
     let tol = if F64 { 1e-9 } else { 1e-4 };
-    assert!((sim.state.v[0].y as f64 - v).abs() < tol * vinf, "{} vs {v}", sim.state.v[0].y);
-    assert!((sim.state.x[0].y as f64 - y).abs() < tol * vinf * t, "{} vs {y}", sim.state.x[0].y);
+    assert!(
+        (sim.state.v[0].y as f64 - v).abs() < tol * vinf,
+        "{} vs {v}",
+        sim.state.v[0].y
+    );
+    assert!(
+        (sim.state.x[0].y as f64 - y).abs() < tol * vinf * t,
+        "{} vs {y}",
+        sim.state.x[0].y
+    );
 }
 
 #[test]
@@ -203,17 +276,29 @@ fn pinned_particles_never_move_and_prescribed_ones_follow_their_path() {
     let (model, state) = scene.build().unwrap();
     let motion = scene.motions[0].motion;
     for kind in IntegratorKind::ALL {
-        let cfg = DriverConfig { integrator: kind, policy: StepPolicy::Fixed { h: 2e-3 }, frame_dt: 0.05, ..Default::default() };
+        let cfg = DriverConfig {
+            integrator: kind,
+            policy: StepPolicy::Fixed { h: 2e-3 },
+            frame_dt: 0.05,
+            ..Default::default()
+        };
         let mut sim = Simulation::new(model.clone(), state.clone(), cfg);
         sim.run(40, |s, _| {
             let (x, v, _) = motion.eval(s.time);
-            assert_eq!(s.state.x[0], x, "{kind}: endpoint position at t = {}", s.time);
+            assert_eq!(
+                s.state.x[0], x,
+                "{kind}: endpoint position at t = {}",
+                s.time
+            );
             assert_eq!(s.state.v[0], v);
         })
         .unwrap();
     }
     // A pinned chain end stays exactly where it was.
-    let (model, state) = build::chain(&build::ChainParams::default()).unwrap().build().unwrap();
+    let (model, state) = build::chain(&build::ChainParams::default())
+        .unwrap()
+        .build()
+        .unwrap();
     let x0 = state.x[0];
     let mut sim = Simulation::new(model, state, DriverConfig::default());
     sim.run(120, |s, _| assert_eq!(s.state.x[0], x0)).unwrap();
@@ -239,7 +324,14 @@ fn wire_endpoint_motion_is_the_slides_circle() {
 
 #[test]
 fn wind_is_deterministic_and_pushes_downwind() {
-    let w = Wind { velocity: [2.0, 0.0, 0.0], gust: 0.5, frequency: 1.0, coefficient: 0.1, seed: 42, enabled: true };
+    let w = Wind {
+        velocity: [2.0, 0.0, 0.0],
+        gust: 0.5,
+        frequency: 1.0,
+        coefficient: 0.1,
+        seed: 42,
+        enabled: true,
+    };
     let f1 = w.field();
     let f2 = w.field();
     for t in [0.0, 0.5, 3.3] {
@@ -248,15 +340,25 @@ fn wind_is_deterministic_and_pushes_downwind() {
     let other = Wind { seed: 43, ..w }.field();
     assert_ne!(f1.velocity(0.5), other.velocity(0.5));
     // A free particle at rest drifts with the mean wind (no gravity).
-    let mut s = Scene { wind: Some(w), ..Default::default() };
+    let mut s = Scene {
+        wind: Some(w),
+        ..Default::default()
+    };
     s.particles.push(p([0.0; 3], 0.05, false));
     let (model, state) = s.build().unwrap();
     let mut sim = Simulation::new(model, state, DriverConfig::default());
     sim.run_until(5.0).unwrap();
-    assert!(sim.state.v[0].x > 1.0, "pushed downwind: {}", sim.state.v[0].x);
+    assert!(
+        sim.state.v[0].x > 1.0,
+        "pushed downwind: {}",
+        sim.state.v[0].x
+    );
     // Disabled wind costs nothing and does nothing.
     let mut s2 = s.clone();
-    s2.wind = Some(Wind { enabled: false, ..w });
+    s2.wind = Some(Wind {
+        enabled: false,
+        ..w
+    });
     let (model2, _) = s2.build().unwrap();
     assert!(model2.wind().is_none());
 }
@@ -280,17 +382,28 @@ fn strain_law_is_hooke_with_k_over_rest_length() {
     let strain_a = mk(SpringLaw::Strain);
     let tol = if F64 { 1e-12 } else { 1e-6 };
     assert!((hooke_a - 10.0 * 0.2).abs() < tol, "Hooke: k (l − L) = 2 N");
-    assert!((strain_a - 10.0 * (0.7 / 0.5 - 1.0)).abs() < tol, "strain: k (l/L − 1) = 4 N");
+    assert!(
+        (strain_a - 10.0 * (0.7 / 0.5 - 1.0)).abs() < tol,
+        "strain: k (l/L − 1) = 4 N"
+    );
 }
 
 #[test]
 fn ground_bounce_reaches_e_squared_height() {
     // Dropped from h0 = 1 m onto a plane with restitution e = 0.8: it rebounds to e² h0.
-    let mut s = Scene { gravity: [0.0, -build::G, 0.0], ..Default::default() };
+    let mut s = Scene {
+        gravity: [0.0, -build::G, 0.0],
+        ..Default::default()
+    };
     s.particles.push(p([0.0, 1.0, 0.0], 0.1, false));
     s.colliders.push(build::ground(0.0, 0.8, 0.0));
     let (model, state) = s.build().unwrap();
-    let cfg = DriverConfig { integrator: IntegratorKind::Rk4, policy: StepPolicy::Fixed { h: 1e-4 }, frame_dt: 1e-3, ..Default::default() };
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::Rk4,
+        policy: StepPolicy::Fixed { h: 1e-4 },
+        frame_dt: 1e-3,
+        ..Default::default()
+    };
     let mut sim = Simulation::new(model, state, cfg);
     let mut bounced = false;
     let mut apex: f64 = 0.0;

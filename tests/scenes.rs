@@ -9,13 +9,28 @@ const F64: bool = cfg!(feature = "f64");
 #[test]
 fn cloth_spring_counts_and_rest_lengths() {
     for (n, m) in [(8, 8), (16, 16), (5, 9), (32, 20)] {
-        let p = build::ClothParams { rows: n, cols: m, ..Default::default() };
+        let p = build::ClothParams {
+            rows: n,
+            cols: m,
+            ..Default::default()
+        };
         let s = build::cloth(&p).unwrap();
         let count = |k| s.springs.iter().filter(|sp| sp.kind == k).count();
-        assert_eq!(count(SpringKind::Structural), (n - 1) * m + n * (m - 1), "{n}x{m}");
+        assert_eq!(
+            count(SpringKind::Structural),
+            (n - 1) * m + n * (m - 1),
+            "{n}x{m}"
+        );
         assert_eq!(count(SpringKind::Shear), 2 * (n - 1) * (m - 1));
         assert_eq!(count(SpringKind::Flex), (n - 2) * m + n * (m - 2));
-        assert_eq!(p.spring_counts(), (count(SpringKind::Structural), count(SpringKind::Shear), count(SpringKind::Flex)));
+        assert_eq!(
+            p.spring_counts(),
+            (
+                count(SpringKind::Structural),
+                count(SpringKind::Shear),
+                count(SpringKind::Flex)
+            )
+        );
         // Every spring starts at rest, and joins the particles index_of says.
         let (model, state) = s.build().unwrap();
         for sp in model.springs.as_slice() {
@@ -28,8 +43,22 @@ fn cloth_spring_counts_and_rest_lengths() {
         assert!((b[0] - a[0] - dx).abs() < 1e-12 && a[1] == b[1]);
         assert!(s.surface.as_ref().unwrap().triangles.len() == 2 * (n - 1) * (m - 1));
     }
-    assert!(build::cloth(&build::ClothParams { rows: 2, ..Default::default() }).is_err());
-    assert!(build::cloth(&build::ClothParams { rows: 10_000, cols: 10_000, ..Default::default() }).is_err(), "10⁸ particles refused");
+    assert!(
+        build::cloth(&build::ClothParams {
+            rows: 2,
+            ..Default::default()
+        })
+        .is_err()
+    );
+    assert!(
+        build::cloth(&build::ClothParams {
+            rows: 10_000,
+            cols: 10_000,
+            ..Default::default()
+        })
+        .is_err(),
+        "10⁸ particles refused"
+    );
 }
 
 #[test]
@@ -40,7 +69,10 @@ fn pyramid_and_jelly_layouts() {
     let mut seen = std::collections::HashSet::new();
     for (k, sp) in s.springs.iter().enumerate() {
         assert!(sp.a != sp.b);
-        assert!(seen.insert((sp.a.min(sp.b), sp.a.max(sp.b))), "duplicate spring {k}");
+        assert!(
+            seen.insert((sp.a.min(sp.b), sp.a.max(sp.b))),
+            "duplicate spring {k}"
+        );
         assert!(build::particle_distance(&s, sp.a, sp.b) > 0.0);
     }
     // Cross-layer springs from the apex reach the four corners of each lower layer at the
@@ -52,14 +84,29 @@ fn pyramid_and_jelly_layouts() {
     assert_eq!(j.particles.len(), 216);
     // 3D grid n³: structural 3n²(n−1), face diagonals 6n(n−1)², body diagonals 4(n−1)³, flex 3n²(n−2).
     let n = 6;
-    let structural = j.springs.iter().filter(|s| s.kind == SpringKind::Structural).count();
-    let shear = j.springs.iter().filter(|s| s.kind == SpringKind::Shear).count();
-    let flex = j.springs.iter().filter(|s| s.kind == SpringKind::Flex).count();
+    let structural = j
+        .springs
+        .iter()
+        .filter(|s| s.kind == SpringKind::Structural)
+        .count();
+    let shear = j
+        .springs
+        .iter()
+        .filter(|s| s.kind == SpringKind::Shear)
+        .count();
+    let flex = j
+        .springs
+        .iter()
+        .filter(|s| s.kind == SpringKind::Flex)
+        .count();
     assert_eq!(structural, 3 * n * n * (n - 1));
     assert_eq!(shear, 6 * n * (n - 1) * (n - 1) + 4 * (n - 1).pow(3));
     assert_eq!(flex, 3 * n * n * (n - 2));
     // Boundary: 6 faces of (n−1)² quads, two triangles each.
-    assert_eq!(j.surface.as_ref().unwrap().triangles.len(), 12 * (n - 1) * (n - 1));
+    assert_eq!(
+        j.surface.as_ref().unwrap().triangles.len(),
+        12 * (n - 1) * (n - 1)
+    );
     j.build().unwrap();
 }
 
@@ -71,11 +118,18 @@ fn json_round_trip_is_exact_for_every_builder() {
         build::cloth_sphere(&build::ClothParams::default(), 0.25, 0.6, 4.0).unwrap(),
         build::wire(11, 0.05, 100).unwrap(),
         build::pyramid(3, 0.2, 0.05, 500.0, 0.5, 0.5).unwrap(),
-        build::jelly(&build::JellyParams { size: [3, 4, 3], ..Default::default() }).unwrap(),
+        build::jelly(&build::JellyParams {
+            size: [3, 4, 3],
+            ..Default::default()
+        })
+        .unwrap(),
         {
             let mut s = build::chain(&build::ChainParams::default()).unwrap();
             s.wind = Some(Wind::default());
-            s.forces.push(bevy_soft_body::core::scene::ForceDesc { particle: 2, force: [0.1, 1.0 / 3.0, -7e-9] });
+            s.forces.push(bevy_soft_body::core::scene::ForceDesc {
+                particle: 2,
+                force: [0.1, 1.0 / 3.0, -7e-9],
+            });
             s.particles[1].velocity = [std::f64::consts::PI, -0.1, 1e-300];
             s
         },
@@ -109,15 +163,27 @@ fn invalid_scenes_are_rejected_with_their_field_paths() {
         (|s| s.particles[2].mass = 0.0, "particles[2].mass"),
         (|s| s.particles[1].mass = -1.0, "particles[1].mass"),
         (|s| s.particles[3].mass = f64::NAN, "particles[3].mass"),
-        (|s| s.particles[1].position[1] = f64::INFINITY, "particles[1].position"),
-        (|s| s.particles[1].velocity[0] = f64::NAN, "particles[1].velocity"),
+        (
+            |s| s.particles[1].position[1] = f64::INFINITY,
+            "particles[1].position",
+        ),
+        (
+            |s| s.particles[1].velocity[0] = f64::NAN,
+            "particles[1].velocity",
+        ),
         (|s| s.springs[1].b = 99, "springs[1].b"),
         (|s| s.springs[0].a = 17, "springs[0].a"),
         (|s| s.springs[2].b = s.springs[2].a, "springs[2].b"),
         (|s| s.springs[0].stiffness = -5.0, "springs[0].stiffness"),
-        (|s| s.springs[0].stiffness = f64::NAN, "springs[0].stiffness"),
+        (
+            |s| s.springs[0].stiffness = f64::NAN,
+            "springs[0].stiffness",
+        ),
         (|s| s.springs[1].damping = -0.1, "springs[1].damping"),
-        (|s| s.springs[1].rest_length = Some(f64::NAN), "springs[1].rest_length"),
+        (
+            |s| s.springs[1].rest_length = Some(f64::NAN),
+            "springs[1].rest_length",
+        ),
         (|s| s.gravity[2] = f64::NAN, "gravity"),
         (|s| s.drag = -1.0, "drag"),
     ];
@@ -137,18 +203,21 @@ fn invalid_scenes_are_rejected_with_their_field_paths() {
     s.particles[2].mass = 0.0;
     s.springs[1].b = 99;
     let err = s.validate().unwrap_err();
-    assert!(err.has("particles[2].mass") && err.has("springs[1].b"), "{err}");
+    assert!(
+        err.has("particles[2].mass") && err.has("springs[1].b"),
+        "{err}"
+    );
 }
 
 #[test]
 fn malformed_json_is_an_error_with_a_position() {
     let good = base().to_json();
     let cases = [
-        &good[..good.len() / 2],                                              // truncated
-        "{\"particles\": [{\"position\": [0, 0], \"mass\": 1}]}",             // short vector
-        "{\"particles\": [{\"position\": [0, 0, 0], \"mass\": 1e999}]}",      // overflows to infinity
+        &good[..good.len() / 2],                                         // truncated
+        "{\"particles\": [{\"position\": [0, 0], \"mass\": 1}]}",        // short vector
+        "{\"particles\": [{\"position\": [0, 0, 0], \"mass\": 1e999}]}", // overflows to infinity
         "{\"particles\": [{\"position\": [0, 0, 0], \"mass\": \"heavy\"}]}", // wrong type
-        "{\"particles\": [], \"sprongs\": []}",                               // unknown field
+        "{\"particles\": [], \"sprongs\": []}",                          // unknown field
         "",
         "null",
     ];
@@ -167,9 +236,18 @@ fn malformed_json_is_an_error_with_a_position() {
 fn substeps_land_exactly_on_frame_ends() {
     // h = 0.007 does not divide 1/60; RK45 chooses its own steps. Either way every frame ends
     // exactly at k/60 (computed from the frame index, no drift).
-    for (kind, h) in [(IntegratorKind::Rk4, 0.007), (IntegratorKind::Rk45, 0.05), (IntegratorKind::Trapezoid, 1.0 / 600.0)] {
+    for (kind, h) in [
+        (IntegratorKind::Rk4, 0.007),
+        (IntegratorKind::Rk45, 0.05),
+        (IntegratorKind::Trapezoid, 1.0 / 600.0),
+    ] {
         let (model, state) = base().build().unwrap();
-        let cfg = DriverConfig { integrator: kind, policy: StepPolicy::Fixed { h }, frame_dt: 1.0 / 60.0, ..Default::default() };
+        let cfg = DriverConfig {
+            integrator: kind,
+            policy: StepPolicy::Fixed { h },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        };
         let mut sim = Simulation::new(model, state, cfg);
         sim.run(120, |s, rep| {
             assert_eq!(s.time, (s.frame as f64 * (1.0 / 60.0)) as Scalar, "{kind}");
@@ -179,7 +257,11 @@ fn substeps_land_exactly_on_frame_ends() {
     }
     // With h = 0.007 each 1/60 frame is 2 full steps and a remainder of 0.00267: 3 substeps.
     let (model, state) = base().build().unwrap();
-    let cfg = DriverConfig { policy: StepPolicy::Fixed { h: 0.007 }, frame_dt: 1.0 / 60.0, ..Default::default() };
+    let cfg = DriverConfig {
+        policy: StepPolicy::Fixed { h: 0.007 },
+        frame_dt: 1.0 / 60.0,
+        ..Default::default()
+    };
     let mut sim = Simulation::new(model, state, cfg);
     let rep = sim.advance_frame().unwrap();
     assert_eq!(rep.substeps, 3);
@@ -190,19 +272,41 @@ fn cfl_policy_follows_the_springs() {
     // Chain: μ = m/2 for the link between two free particles, √(μ/k) = √(0.05/200) = 0.0158 s;
     // the first link has one fixed end, μ = m: √(0.1/200) = 0.0224 s. CFL 0.5 → 0.0079 s.
     let (model, state) = base().build().unwrap();
-    let cfg = DriverConfig { policy: StepPolicy::Cfl { number: 0.5, max: 1.0 }, ..Default::default() };
+    let cfg = DriverConfig {
+        policy: StepPolicy::Cfl {
+            number: 0.5,
+            max: 1.0,
+        },
+        ..Default::default()
+    };
     let sim = Simulation::new(model, state, cfg);
     let expected = 0.5 * (0.05f64 / 200.0).sqrt();
-    assert!((sim.step_size() as f64 - expected).abs() < 1e-6, "{}", sim.step_size());
+    assert!(
+        (sim.step_size() as f64 - expected).abs() < 1e-6,
+        "{}",
+        sim.step_size()
+    );
 }
 
 fn seed_cloth() -> (ParticleModel, ParticleState) {
-    build::cloth(&build::ClothParams::default()).unwrap().build().unwrap()
+    build::cloth(&build::ClothParams::default())
+        .unwrap()
+        .build()
+        .unwrap()
 }
 
-fn run_cloth(kind: IntegratorKind, h: f64, seconds: f64) -> Result<Simulation<ParticleState, ParticleModel>, Divergence> {
+fn run_cloth(
+    kind: IntegratorKind,
+    h: f64,
+    seconds: f64,
+) -> Result<Simulation<ParticleState, ParticleModel>, Divergence> {
     let (model, state) = seed_cloth();
-    let cfg = DriverConfig { integrator: kind, policy: StepPolicy::Fixed { h }, frame_dt: 1.0 / 60.0, ..Default::default() };
+    let cfg = DriverConfig {
+        integrator: kind,
+        policy: StepPolicy::Fixed { h },
+        frame_dt: 1.0 / 60.0,
+        ..Default::default()
+    };
     let mut sim = Simulation::new(model, state, cfg);
     sim.run_until(seconds)?;
     Ok(sim)
@@ -216,35 +320,72 @@ fn seed_cloth_claims_euler_diverges_trapezoid_and_rk4_hold() {
     // particle, k = 100/50/20 N/m, dampers 0.05 N·s/m, drag 0.01 N·s/m) the stiffest mode has
     // ω ≈ 2√((k_struct + k_shear)/m) ≈ 245 rad/s, so h = 0.005 gives hω ≈ 1.2: outside forward
     // Euler's region for a lightly damped oscillation, inside RK4's (|hω| < 2.83).
-    let err = run_cloth(IntegratorKind::ForwardEuler, 0.005, 3.0).err().expect("forward Euler at h = 0.005 must diverge");
+    let err = run_cloth(IntegratorKind::ForwardEuler, 0.005, 3.0)
+        .err()
+        .expect("forward Euler at h = 0.005 must diverge");
     println!("{err}");
     assert!(err.time < 3.0);
-    assert!(matches!(err.reason, DivergenceReason::NonFinite | DivergenceReason::EnergyBlowup { .. }));
+    assert!(matches!(
+        err.reason,
+        DivergenceReason::NonFinite | DivergenceReason::EnergyBlowup { .. }
+    ));
 
-    for (kind, h) in [(IntegratorKind::Trapezoid, 0.001), (IntegratorKind::Rk4, 0.005)] {
+    for (kind, h) in [
+        (IntegratorKind::Trapezoid, 0.001),
+        (IntegratorKind::Rk4, 0.005),
+    ] {
         let sim = run_cloth(kind, h, 3.0).unwrap_or_else(|e| panic!("{kind} at h = {h}: {e}"));
         // Physically sane after 3 s: the cloth hangs below its pins, no faster than free fall.
-        let vmax = sim.state.v.iter().map(|v| v.length()).fold(0.0, Scalar::max);
+        let vmax = sim
+            .state
+            .v
+            .iter()
+            .map(|v| v.length())
+            .fold(0.0, Scalar::max);
         assert!(vmax < 3.0 * 9.81, "{kind}: max speed {vmax}");
-        let lowest = sim.state.x.iter().map(|x| x.y).fold(Scalar::INFINITY, Scalar::min);
-        assert!(lowest > -1.0 && lowest < 0.1, "{kind}: lowest point {lowest}");
+        let lowest = sim
+            .state
+            .x
+            .iter()
+            .map(|x| x.y)
+            .fold(Scalar::INFINITY, Scalar::min);
+        assert!(
+            lowest > -1.0 && lowest < 0.1,
+            "{kind}: lowest point {lowest}"
+        );
     }
 }
 
 #[test]
 fn divergence_keeps_the_last_good_state() {
     let (model, state) = seed_cloth();
-    let cfg = DriverConfig { integrator: IntegratorKind::ForwardEuler, policy: StepPolicy::Fixed { h: 0.01 }, ..Default::default() };
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::ForwardEuler,
+        policy: StepPolicy::Fixed { h: 0.01 },
+        ..Default::default()
+    };
     let mut sim = Simulation::new(model, state, cfg);
     let err = sim.run_until(10.0).unwrap_err();
-    assert!(sim.state.x.iter().chain(&sim.state.v).all(|v| v.is_finite()));
+    assert!(
+        sim.state
+            .x
+            .iter()
+            .chain(&sim.state.v)
+            .all(|v| v.is_finite())
+    );
     let msg = err.to_string();
-    assert!(msg.contains("forward Euler") && msg.contains("smaller h"), "{msg}");
+    assert!(
+        msg.contains("forward Euler") && msg.contains("smaller h"),
+        "{msg}"
+    );
     // Without the energy guard, f32 overflows to non-finite and is caught as such; f64 keeps
     // growing finite numbers for a long time, which is why the guard exists.
     if !F64 {
         let (model, state) = seed_cloth();
-        let cfg = DriverConfig { energy_guard: None, ..cfg };
+        let cfg = DriverConfig {
+            energy_guard: None,
+            ..cfg
+        };
         let mut sim = Simulation::new(model, state, cfg);
         let err = sim.run_until(30.0).unwrap_err();
         assert_eq!(err.reason, DivergenceReason::NonFinite);

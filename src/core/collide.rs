@@ -45,8 +45,13 @@ impl ShapeDesc {
         match *self {
             ShapeDesc::Sphere { radius } => SharedShape::ball(radius as f32),
             ShapeDesc::Plane { normal } => SharedShape::halfspace(to_f32(vec3(normal)).normalize()),
-            ShapeDesc::Cuboid { half_extents: h } => SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32),
-            ShapeDesc::Capsule { half_height, radius } => SharedShape::capsule_y(half_height as f32, radius as f32),
+            ShapeDesc::Cuboid { half_extents: h } => {
+                SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32)
+            }
+            ShapeDesc::Capsule {
+                half_height,
+                radius,
+            } => SharedShape::capsule_y(half_height as f32, radius as f32),
         }
     }
 
@@ -55,10 +60,16 @@ impl ShapeDesc {
         match *self {
             ShapeDesc::Sphere { radius } => radius.is_finite() && radius > 0.0,
             ShapeDesc::Plane { normal } => {
-                normal.iter().all(|x| x.is_finite()) && normal.iter().map(|x| x * x).sum::<f64>() > 1e-12
+                normal.iter().all(|x| x.is_finite())
+                    && normal.iter().map(|x| x * x).sum::<f64>() > 1e-12
             }
-            ShapeDesc::Cuboid { half_extents } => half_extents.iter().all(|x| x.is_finite() && *x > 0.0),
-            ShapeDesc::Capsule { half_height, radius } => {
+            ShapeDesc::Cuboid { half_extents } => {
+                half_extents.iter().all(|x| x.is_finite() && *x > 0.0)
+            }
+            ShapeDesc::Capsule {
+                half_height,
+                radius,
+            } => {
                 half_height.is_finite() && half_height >= 0.0 && radius.is_finite() && radius > 0.0
             }
         }
@@ -81,7 +92,12 @@ pub struct ContactMaterial {
 
 impl Default for ContactMaterial {
     fn default() -> Self {
-        Self { friction: 0.3, restitution: 0.0, thickness: 0.01, bounce_threshold: 0.05 }
+        Self {
+            friction: 0.3,
+            restitution: 0.0,
+            thickness: 0.01,
+            bounce_threshold: 0.05,
+        }
     }
 }
 
@@ -125,7 +141,12 @@ pub struct Collider {
 
 impl Clone for Collider {
     fn clone(&self) -> Self {
-        Self::new(self.shape.clone(), self.motion, self.rotation, self.material)
+        Self::new(
+            self.shape.clone(),
+            self.motion,
+            self.rotation,
+            self.material,
+        )
     }
 }
 
@@ -141,7 +162,12 @@ impl std::fmt::Debug for Collider {
 
 impl Collider {
     /// A collider from any parry3d shape.
-    pub fn new(shape: SharedShape, motion: Motion, rotation: Rot3, material: ContactMaterial) -> Self {
+    pub fn new(
+        shape: SharedShape,
+        motion: Motion,
+        rotation: Rot3,
+        material: ContactMaterial,
+    ) -> Self {
         let fast = if let Some(b) = shape.as_ball() {
             Fast::Sphere(b.radius as Scalar)
         } else if let Some(h) = shape.as_halfspace() {
@@ -149,7 +175,13 @@ impl Collider {
         } else {
             Fast::General
         };
-        Self { shape, motion, rotation, material, fast }
+        Self {
+            shape,
+            motion,
+            rotation,
+            material,
+            fast,
+        }
     }
 
     /// From a layout description.
@@ -162,7 +194,13 @@ impl Collider {
     /// Pushes particles out of the collider at time `t` and applies restitution and friction.
     /// `inv_mass` selects the particles that respond (zero: pinned or prescribed). Returns the
     /// number of particles in contact.
-    pub fn resolve(&self, t: Scalar, x: &mut [Vector], v: &mut [Vector], inv_mass: &[Scalar]) -> usize {
+    pub fn resolve(
+        &self,
+        t: Scalar,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        inv_mass: &[Scalar],
+    ) -> usize {
         let (c, vc, _) = self.motion.eval(t);
         let m = &self.material;
         let thick = m.thickness as Scalar;
@@ -185,7 +223,11 @@ impl Collider {
                 }
                 Fast::Plane(n) => {
                     let s = (p - c).dot(n);
-                    if s < thick { Some((p + n * (thick - s), n)) } else { None }
+                    if s < thick {
+                        Some((p + n * (thick - s), n))
+                    } else {
+                        None
+                    }
                 }
                 Fast::General => {
                     let pose = Pose3::from_parts(to_f32(c), self.rotation);
@@ -195,7 +237,11 @@ impl Collider {
                     let dist = d.length();
                     if proj.is_inside {
                         // Inside: the way out is towards the projection.
-                        let (n, _) = if dist > 1e-9 { (-d / dist, dist) } else { (glam::Vec3::Y, 0.0) };
+                        let (n, _) = if dist > 1e-9 {
+                            (-d / dist, dist)
+                        } else {
+                            (glam::Vec3::Y, 0.0)
+                        };
                         let n = from_f32(n);
                         Some((from_f32(proj.point) + n * thick, n))
                     } else if (dist as Scalar) < thick && dist > 1e-9 {
@@ -213,10 +259,18 @@ impl Collider {
                 let vn = rel.dot(n);
                 if vn < 0.0 {
                     let vt = rel - n * vn;
-                    let e = if -vn > m.bounce_threshold as Scalar { m.restitution as Scalar } else { 0.0 };
+                    let e = if -vn > m.bounce_threshold as Scalar {
+                        m.restitution as Scalar
+                    } else {
+                        0.0
+                    };
                     let dvn = -(1.0 + e) * vn;
                     let vt_len = vt.length();
-                    let keep = if vt_len > 0.0 { (1.0 - m.friction as Scalar * dvn / vt_len).max(0.0) } else { 0.0 };
+                    let keep = if vt_len > 0.0 {
+                        (1.0 - m.friction as Scalar * dvn / vt_len).max(0.0)
+                    } else {
+                        0.0
+                    };
                     v[i] = vc + n * (-e * vn) + vt * keep;
                 }
             }

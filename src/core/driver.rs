@@ -2,7 +2,9 @@
 //! that land exactly on the frame's end, with a divergence guard that keeps the last good
 //! state and says what happened.
 
-use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, StepError};
+use crate::core::integrate::{
+    AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, StepError,
+};
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::math::Scalar;
 use serde::{Deserialize, Serialize};
@@ -151,9 +153,21 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     pub fn new(system: Sys, mut state: S, config: DriverConfig) -> Self {
         system.apply_constraints(0.0, &mut state);
         let integrator = config.integrator.build::<S, Sys>(config.adaptive);
-        let energy_bound = config.energy_guard.and_then(|f| system.energy_scale(&state).map(|s| s * f as Scalar));
+        let energy_bound = config
+            .energy_guard
+            .and_then(|f| system.energy_scale(&state).map(|s| s * f as Scalar));
         let backup = state.clone();
-        Self { system, state, time: 0.0, frame: 0, config, integrator, backup, energy_bound, start_time: 0.0 }
+        Self {
+            system,
+            state,
+            time: 0.0,
+            frame: 0,
+            config,
+            integrator,
+            backup,
+            energy_bound,
+            start_time: 0.0,
+        }
     }
 
     /// The settings.
@@ -192,12 +206,20 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
         let t_end = self.frame_end(self.frame + 1);
         let h_pol = self.step_size();
-        let mut rep = FrameReport { substeps: 0, h_min: Scalar::INFINITY, h_max: 0.0 };
+        let mut rep = FrameReport {
+            substeps: 0,
+            h_min: Scalar::INFINITY,
+            h_max: 0.0,
+        };
         while self.time < t_end {
             let remaining = t_end - self.time;
             // Within 0.1 % of the end: take the remainder rather than leave a sliver (the
             // slides' `min(dt_max, 1.001 (t_frame − t))`, landing exactly).
-            let (h, last) = if remaining <= h_pol * 1.001 { (remaining, true) } else { (h_pol, false) };
+            let (h, last) = if remaining <= h_pol * 1.001 {
+                (remaining, true)
+            } else {
+                (h_pol, false)
+            };
             let t = self.time;
             self.system.apply_constraints(t, &mut self.state);
             self.backup.copy_from(&self.state);
@@ -226,7 +248,13 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                 let k = self.system.kinetic_energy(&self.state);
                 if !(k <= bound) {
                     self.state.copy_from(&self.backup);
-                    return Err(fail(DivergenceReason::EnergyBlowup { kinetic: k as f64, bound: bound as f64 }, taken));
+                    return Err(fail(
+                        DivergenceReason::EnergyBlowup {
+                            kinetic: k as f64,
+                            bound: bound as f64,
+                        },
+                        taken,
+                    ));
                 }
             }
             self.time = t_new;
@@ -239,7 +267,11 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     }
 
     /// Advances `frames` frames, calling `on_frame` after each.
-    pub fn run(&mut self, frames: u64, mut on_frame: impl FnMut(&Self, &FrameReport)) -> Result<(), Divergence> {
+    pub fn run(
+        &mut self,
+        frames: u64,
+        mut on_frame: impl FnMut(&Self, &FrameReport),
+    ) -> Result<(), Divergence> {
         for _ in 0..frames {
             let rep = self.advance_frame()?;
             on_frame(self, &rep);
@@ -249,8 +281,9 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
 
     /// Advances until `time` (rounded up to whole frames).
     pub fn run_until(&mut self, time: f64) -> Result<(), Divergence> {
-        let frames = ((time - self.time as f64) / self.config.frame_dt - 1e-9).ceil().max(0.0) as u64;
+        let frames = ((time - self.time as f64) / self.config.frame_dt - 1e-9)
+            .ceil()
+            .max(0.0) as u64;
         self.run(frames, |_, _| {})
     }
 }
-

@@ -71,18 +71,34 @@ impl Motion {
     pub fn eval(&self, t: Scalar) -> (Vector, Vector, Vector) {
         match *self {
             Motion::Fixed { position } => (vec3(position), Vector::ZERO, Vector::ZERO),
-            Motion::Linear { start, velocity, t0 } => {
+            Motion::Linear {
+                start,
+                velocity,
+                t0,
+            } => {
                 let v = vec3(velocity);
                 (vec3(start) + v * (t - t0 as Scalar), v, Vector::ZERO)
             }
-            Motion::Circle { center, radius, omega, phase, a, b } => {
+            Motion::Circle {
+                center,
+                radius,
+                omega,
+                phase,
+                a,
+                b,
+            } => {
                 let (r, w) = (radius as Scalar, omega as Scalar);
                 let (s, c) = (w * t + phase as Scalar).sin_cos();
                 let (a, b) = (vec3(a), vec3(b));
                 let p = (a * s + b * c) * r;
                 (vec3(center) + p, (a * c - b * s) * (r * w), -p * (w * w))
             }
-            Motion::Oscillate { center, amplitude, omega, phase } => {
+            Motion::Oscillate {
+                center,
+                amplitude,
+                omega,
+                phase,
+            } => {
                 let w = omega as Scalar;
                 let (s, c) = (w * t + phase as Scalar).sin_cos();
                 let amp = vec3(amplitude);
@@ -106,11 +122,25 @@ impl Motion {
         let f = |a: &[f64]| a.iter().all(|x| x.is_finite());
         match self {
             Motion::Fixed { position } => f(position),
-            Motion::Linear { start, velocity, t0 } => f(start) && f(velocity) && t0.is_finite(),
-            Motion::Circle { center, radius, omega, phase, a, b } => {
-                f(center) && f(a) && f(b) && f(&[*radius, *omega, *phase])
-            }
-            Motion::Oscillate { center, amplitude, omega, phase } => f(center) && f(amplitude) && f(&[*omega, *phase]),
+            Motion::Linear {
+                start,
+                velocity,
+                t0,
+            } => f(start) && f(velocity) && t0.is_finite(),
+            Motion::Circle {
+                center,
+                radius,
+                omega,
+                phase,
+                a,
+                b,
+            } => f(center) && f(a) && f(b) && f(&[*radius, *omega, *phase]),
+            Motion::Oscillate {
+                center,
+                amplitude,
+                omega,
+                phase,
+            } => f(center) && f(amplitude) && f(&[*omega, *phase]),
         }
     }
 }

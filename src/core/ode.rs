@@ -128,7 +128,13 @@ pub(crate) fn slice_norm2(y: &[Vector]) -> Scalar {
 }
 
 /// Sum of squared scaled errors over a slice (see [`OdeState::error_norm`]).
-pub(crate) fn slice_err2(e: &[Vector], a: &[Vector], b: &[Vector], atol: Scalar, rtol: Scalar) -> Scalar {
+pub(crate) fn slice_err2(
+    e: &[Vector],
+    a: &[Vector],
+    b: &[Vector],
+    atol: Scalar,
+    rtol: Scalar,
+) -> Scalar {
     let mut s = 0.0;
     for ((ei, ai), bi) in e.iter().zip(a).zip(b) {
         let (ei, ai, bi) = (comps(*ei), comps(*ai), comps(*bi));
@@ -212,7 +218,11 @@ impl OdeState for Vec<Scalar> {
         (s / err.len() as Scalar).sqrt()
     }
     fn same_as(&self, other: &Self) -> bool {
-        self.len() == other.len() && self.iter().zip(other).all(|(a, b)| a.to_bits() == b.to_bits())
+        self.len() == other.len()
+            && self
+                .iter()
+                .zip(other)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
     }
 }
 
@@ -229,7 +239,10 @@ pub struct ParticleState {
 impl ParticleState {
     /// A state of `n` particles at the origin, at rest.
     pub fn zeros(n: usize) -> Self {
-        Self { x: vec![Vector::ZERO; n], v: vec![Vector::ZERO; n] }
+        Self {
+            x: vec![Vector::ZERO; n],
+            v: vec![Vector::ZERO; n],
+        }
     }
     /// Number of particles.
     pub fn len(&self) -> usize {
@@ -268,7 +281,8 @@ impl OdeState for ParticleState {
         if n == 0 {
             return 0.0;
         }
-        let s = slice_err2(&err.x, &a.x, &b.x, atol, rtol) + slice_err2(&err.v, &a.v, &b.v, atol, rtol);
+        let s =
+            slice_err2(&err.x, &a.x, &b.x, atol, rtol) + slice_err2(&err.v, &a.v, &b.v, atol, rtol);
         (s / n as Scalar).sqrt()
     }
     fn same_as(&self, other: &Self) -> bool {
@@ -315,6 +329,9 @@ impl OdeSystem<Vector> for CircleSystem {
     }
     fn energy(&self, _t: Scalar, x: &Vector) -> Option<Energy> {
         // The conserved quantity r²/2 plays the role of energy for diagnostics.
-        Some(Energy { kinetic: 0.0, potential: 0.5 * (x.x * x.x + x.y * x.y) })
+        Some(Energy {
+            kinetic: 0.0,
+            potential: 0.5 * (x.x * x.x + x.y * x.y),
+        })
     }
 }

@@ -77,13 +77,21 @@ impl std::fmt::Display for ModelError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::BadMass { particle, mass } => {
-                write!(f, "particle {particle}: mass {mass} must be positive and finite unless the particle is pinned")
+                write!(
+                    f,
+                    "particle {particle}: mass {mass} must be positive and finite unless the particle is pinned"
+                )
             }
             Self::SpringOutOfRange { spring, particle } => {
-                write!(f, "spring {spring}: particle index {particle} is out of range")
+                write!(
+                    f,
+                    "spring {spring}: particle index {particle} is out of range"
+                )
             }
             Self::BadSpring { spring, reason } => write!(f, "spring {spring}: {reason}"),
-            Self::ParticleOutOfRange { particle } => write!(f, "particle index {particle} is out of range"),
+            Self::ParticleOutOfRange { particle } => {
+                write!(f, "particle index {particle} is out of range")
+            }
             Self::NonFinite(what) => write!(f, "{what} is not finite"),
         }
     }
@@ -94,8 +102,21 @@ impl std::error::Error for ModelError {}
 impl ParticleModel {
     /// A model of particles with the given masses, all free, with no forces.
     pub fn new(mass: Vec<Scalar>) -> Self {
-        let inv_mass = mass.iter().map(|&m| if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 }).collect();
-        Self { mass, inv_mass, ..Default::default() }
+        let inv_mass = mass
+            .iter()
+            .map(|&m| {
+                if m > 0.0 && m.is_finite() {
+                    1.0 / m
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        Self {
+            mass,
+            inv_mass,
+            ..Default::default()
+        }
     }
 
     /// Number of particles.
@@ -137,7 +158,11 @@ impl ParticleModel {
         self.pinned.retain(|(p, _)| *p as usize != i);
         self.prescribed.retain(|(p, _)| *p as usize != i);
         let m = self.mass[i];
-        self.inv_mass[i] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+        self.inv_mass[i] = if m > 0.0 && m.is_finite() {
+            1.0 / m
+        } else {
+            0.0
+        };
     }
 
     /// How particle `i` moves.
@@ -187,32 +212,54 @@ impl ParticleModel {
     pub fn validate(&self) -> Result<(), ModelError> {
         let n = self.len();
         for (i, &m) in self.mass.iter().enumerate() {
-            if self.inv_mass[i] == 0.0 && matches!(self.dof(i), Dof::Free) || !m.is_finite() && m != 0.0 {
-                return Err(ModelError::BadMass { particle: i, mass: m });
+            if self.inv_mass[i] == 0.0 && matches!(self.dof(i), Dof::Free)
+                || !m.is_finite() && m != 0.0
+            {
+                return Err(ModelError::BadMass {
+                    particle: i,
+                    mass: m,
+                });
             }
         }
         for (k, s) in self.springs.as_slice().iter().enumerate() {
             for p in [s.i as usize, s.j as usize] {
                 if p >= n {
-                    return Err(ModelError::SpringOutOfRange { spring: k, particle: p });
+                    return Err(ModelError::SpringOutOfRange {
+                        spring: k,
+                        particle: p,
+                    });
                 }
             }
             if s.i == s.j {
-                return Err(ModelError::BadSpring { spring: k, reason: "joins a particle to itself" });
+                return Err(ModelError::BadSpring {
+                    spring: k,
+                    reason: "joins a particle to itself",
+                });
             }
             if !(s.k.is_finite() && s.k >= 0.0) {
-                return Err(ModelError::BadSpring { spring: k, reason: "stiffness must be finite and non-negative" });
+                return Err(ModelError::BadSpring {
+                    spring: k,
+                    reason: "stiffness must be finite and non-negative",
+                });
             }
             if !(s.rest.is_finite() && s.rest >= 0.0) {
-                return Err(ModelError::BadSpring { spring: k, reason: "rest length must be finite and non-negative" });
+                return Err(ModelError::BadSpring {
+                    spring: k,
+                    reason: "rest length must be finite and non-negative",
+                });
             }
             if !(s.damping.is_finite() && s.damping >= 0.0) {
-                return Err(ModelError::BadSpring { spring: k, reason: "damping must be finite and non-negative" });
+                return Err(ModelError::BadSpring {
+                    spring: k,
+                    reason: "damping must be finite and non-negative",
+                });
             }
         }
         for &(p, x) in &self.pinned {
             if p as usize >= n {
-                return Err(ModelError::ParticleOutOfRange { particle: p as usize });
+                return Err(ModelError::ParticleOutOfRange {
+                    particle: p as usize,
+                });
             }
             if !x.is_finite() {
                 return Err(ModelError::NonFinite("pin position"));
@@ -220,7 +267,9 @@ impl ParticleModel {
         }
         for (p, m) in &self.prescribed {
             if *p as usize >= n {
-                return Err(ModelError::ParticleOutOfRange { particle: *p as usize });
+                return Err(ModelError::ParticleOutOfRange {
+                    particle: *p as usize,
+                });
             }
             if !m.is_finite() {
                 return Err(ModelError::NonFinite("prescribed motion"));
@@ -230,7 +279,9 @@ impl ParticleModel {
             return Err(ModelError::NonFinite("gravity"));
         }
         if !(self.drag.is_finite() && self.drag >= 0.0) {
-            return Err(ModelError::NonFinite("drag (must be finite and non-negative)"));
+            return Err(ModelError::NonFinite(
+                "drag (must be finite and non-negative)",
+            ));
         }
         if let Some(e) = &self.external {
             if e.len() != n {
@@ -371,7 +422,10 @@ impl OdeSystem<ParticleState> for ParticleModel {
         }
         let reach = (hi - lo).length() + 1.0;
         let total_mass: Scalar = self.mass.iter().filter(|m| m.is_finite()).sum();
-        let ext: Scalar = self.external.as_ref().map_or(0.0, |e| e.iter().map(|f| f.length()).sum());
+        let ext: Scalar = self
+            .external
+            .as_ref()
+            .map_or(0.0, |e| e.iter().map(|f| f.length()).sum());
         let wind = self.wind.as_ref().map_or(0.0, |(w, _)| {
             let speed = crate::math::vec3(w.velocity).length() + w.gust as Scalar * 3.0;
             0.5 * total_mass * speed * speed

@@ -163,7 +163,12 @@ impl SceneError {
 
 impl fmt::Display for SceneError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "invalid scene ({} problem{})", self.errors.len(), if self.errors.len() == 1 { "" } else { "s" })?;
+        write!(
+            f,
+            "invalid scene ({} problem{})",
+            self.errors.len(),
+            if self.errors.len() == 1 { "" } else { "s" }
+        )?;
         for e in &self.errors {
             write!(f, "\n  {e}")?;
         }
@@ -188,7 +193,10 @@ impl Scene {
     /// invalid field is reported with its path.
     pub fn from_json(text: &str) -> Result<Scene, SceneError> {
         let scene: Scene = serde_json::from_str(text).map_err(|e| SceneError {
-            errors: vec![FieldError { path: format!("line {}, column {}", e.line(), e.column()), message: e.to_string() }],
+            errors: vec![FieldError {
+                path: format!("line {}, column {}", e.line(), e.column()),
+                message: e.to_string(),
+            }],
         })?;
         scene.validate()?;
         Ok(scene)
@@ -202,13 +210,24 @@ impl Scene {
     /// Checks every field; returns all problems at once.
     pub fn validate(&self) -> Result<(), SceneError> {
         let mut errs = Vec::new();
-        let mut err = |path: String, message: &str| errs.push(FieldError { path, message: message.to_string() });
+        let mut err = |path: String, message: &str| {
+            errs.push(FieldError {
+                path,
+                message: message.to_string(),
+            })
+        };
         let n = self.particles.len();
         if n > MAX_PARTICLES {
-            err("particles".into(), &format!("{n} particles is more than the limit of {MAX_PARTICLES}"));
+            err(
+                "particles".into(),
+                &format!("{n} particles is more than the limit of {MAX_PARTICLES}"),
+            );
         }
         if self.springs.len() > MAX_SPRINGS {
-            err("springs".into(), &format!("more than the limit of {MAX_SPRINGS} springs"));
+            err(
+                "springs".into(),
+                &format!("more than the limit of {MAX_SPRINGS} springs"),
+            );
         }
         if !finite3(&self.gravity) {
             err("gravity".into(), "must be finite");
@@ -238,7 +257,11 @@ impl Scene {
             if !p.mass.is_finite() || p.mass < 0.0 || (p.mass == 0.0 && !fixed) {
                 err(
                     format!("particles[{i}].mass"),
-                    if fixed { "must be finite and non-negative" } else { "must be positive and finite (or pin the particle)" },
+                    if fixed {
+                        "must be finite and non-negative"
+                    } else {
+                        "must be positive and finite (or pin the particle)"
+                    },
                 );
             }
         }
@@ -250,26 +273,40 @@ impl Scene {
                 err(format!("springs[{k}].b"), "index out of range");
             }
             if s.a == s.b {
-                err(format!("springs[{k}].b"), "a spring cannot join a particle to itself");
+                err(
+                    format!("springs[{k}].b"),
+                    "a spring cannot join a particle to itself",
+                );
             }
             if !(s.stiffness.is_finite() && s.stiffness >= 0.0) {
-                err(format!("springs[{k}].stiffness"), "must be finite and non-negative");
+                err(
+                    format!("springs[{k}].stiffness"),
+                    "must be finite and non-negative",
+                );
             }
             if !(s.damping.is_finite() && s.damping >= 0.0) {
-                err(format!("springs[{k}].damping"), "must be finite and non-negative");
+                err(
+                    format!("springs[{k}].damping"),
+                    "must be finite and non-negative",
+                );
             }
             match s.rest_length {
-                Some(l) if !(l.is_finite() && l >= 0.0) => {
-                    err(format!("springs[{k}].rest_length"), "must be finite and non-negative")
-                }
-                Some(l) if l == 0.0 && s.law == SpringLaw::Strain => {
-                    err(format!("springs[{k}].rest_length"), "a strain-law spring needs a positive rest length")
-                }
+                Some(l) if !(l.is_finite() && l >= 0.0) => err(
+                    format!("springs[{k}].rest_length"),
+                    "must be finite and non-negative",
+                ),
+                Some(l) if l == 0.0 && s.law == SpringLaw::Strain => err(
+                    format!("springs[{k}].rest_length"),
+                    "a strain-law spring needs a positive rest length",
+                ),
                 None if s.law == SpringLaw::Strain && s.a < n && s.b < n && s.a != s.b => {
                     let (pa, pb) = (self.particles[s.a].position, self.particles[s.b].position);
                     let d2: f64 = (0..3).map(|c| (pa[c] - pb[c]).powi(2)).sum();
                     if d2 == 0.0 {
-                        err(format!("springs[{k}].rest_length"), "a strain-law spring needs a positive rest length");
+                        err(
+                            format!("springs[{k}].rest_length"),
+                            "a strain-law spring needs a positive rest length",
+                        );
                     }
                 }
                 _ => {}
@@ -287,12 +324,18 @@ impl Scene {
             if !(finite3(&w.velocity) && w.gust.is_finite() && w.frequency.is_finite())
                 || !(w.coefficient.is_finite() && w.coefficient >= 0.0)
             {
-                err("wind".into(), "numbers must be finite and the coefficient non-negative");
+                err(
+                    "wind".into(),
+                    "numbers must be finite and the coefficient non-negative",
+                );
             }
         }
         for (k, c) in self.colliders.iter().enumerate() {
             if !c.shape.is_valid() {
-                err(format!("colliders[{k}].shape"), "dimensions must be finite and positive");
+                err(
+                    format!("colliders[{k}].shape"),
+                    "dimensions must be finite and positive",
+                );
             }
             if !c.motion.is_finite() {
                 err(format!("colliders[{k}].motion"), "must be finite");
@@ -300,7 +343,10 @@ impl Scene {
             let q = c.rotation;
             let qn: f64 = q.iter().map(|x| x * x).sum();
             if !(qn.is_finite() && qn > 1e-12) {
-                err(format!("colliders[{k}].rotation"), "must be a finite non-zero quaternion");
+                err(
+                    format!("colliders[{k}].rotation"),
+                    "must be a finite non-zero quaternion",
+                );
             }
             let m = &c.material;
             for (name, v) in [
@@ -310,7 +356,10 @@ impl Scene {
                 ("bounce_threshold", m.bounce_threshold),
             ] {
                 if !(v.is_finite() && v >= 0.0) {
-                    err(format!("colliders[{k}].material.{name}"), "must be finite and non-negative");
+                    err(
+                        format!("colliders[{k}].material.{name}"),
+                        "must be finite and non-negative",
+                    );
                 }
             }
         }
@@ -324,7 +373,11 @@ impl Scene {
                 err("surface.uvs".into(), "needs one entry per particle");
             }
         }
-        if errs.is_empty() { Ok(()) } else { Err(SceneError { errors: errs }) }
+        if errs.is_empty() {
+            Ok(())
+        } else {
+            Err(SceneError { errors: errs })
+        }
     }
 
     /// Rest length of spring `k` (given, or the initial distance).
@@ -340,7 +393,12 @@ impl Scene {
     pub fn initial_state(&self) -> ParticleState {
         ParticleState {
             x: self.particles.iter().map(|p| vec3(p.position)).collect(),
-            v: self.particles.iter().map(|p| if p.pinned { [0.0; 3] } else { p.velocity }).map(vec3).collect(),
+            v: self
+                .particles
+                .iter()
+                .map(|p| if p.pinned { [0.0; 3] } else { p.velocity })
+                .map(vec3)
+                .collect(),
         }
     }
 
@@ -358,7 +416,14 @@ impl Scene {
             model.prescribe(m.particle, m.motion);
         }
         for (k, s) in self.springs.iter().enumerate() {
-            model.springs.push(s.a, s.b, sc(self.rest_length(k)), sc(s.stiffness), sc(s.damping), s.law);
+            model.springs.push(
+                s.a,
+                s.b,
+                sc(self.rest_length(k)),
+                sc(s.stiffness),
+                sc(s.damping),
+                s.law,
+            );
         }
         model.gravity = vec3(self.gravity);
         model.drag = sc(self.drag);
@@ -367,7 +432,12 @@ impl Scene {
             model.set_external_force(f.particle, vec3(f.force));
         }
         model.colliders = self.colliders.iter().map(Collider::from_desc).collect();
-        model.validate().map_err(|e| SceneError { errors: vec![FieldError { path: "model".into(), message: e.to_string() }] })?;
+        model.validate().map_err(|e| SceneError {
+            errors: vec![FieldError {
+                path: "model".into(),
+                message: e.to_string(),
+            }],
+        })?;
         Ok((model, state))
     }
 }

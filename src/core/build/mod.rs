@@ -5,7 +5,9 @@
 use crate::core::collide::{ColliderDesc, ContactMaterial, ShapeDesc};
 use crate::core::forces::SpringLaw;
 use crate::core::motion::Motion;
-use crate::core::scene::{MAX_PARTICLES, MotionDesc, ParticleDesc, Scene, SpringDesc, SpringKind, Surface};
+use crate::core::scene::{
+    MAX_PARTICLES, MotionDesc, ParticleDesc, Scene, SpringDesc, SpringKind, Surface,
+};
 use serde::{Deserialize, Serialize};
 
 /// Standard gravity (m/s²), along −y.
@@ -25,10 +27,14 @@ impl std::error::Error for BuildError {}
 
 fn check_count(what: &str, n: usize, min: usize) -> Result<(), BuildError> {
     if n > MAX_PARTICLES {
-        return Err(BuildError(format!("{what}: {n} particles is more than the limit of {MAX_PARTICLES}")));
+        return Err(BuildError(format!(
+            "{what}: {n} particles is more than the limit of {MAX_PARTICLES}"
+        )));
     }
     if n < min {
-        return Err(BuildError(format!("{what}: needs at least {min} particles, got {n}")));
+        return Err(BuildError(format!(
+            "{what}: needs at least {min} particles, got {n}"
+        )));
     }
     Ok(())
 }
@@ -38,11 +44,24 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 fn particle(position: [f64; 3], mass: f64) -> ParticleDesc {
-    ParticleDesc { position, velocity: [0.0; 3], mass, pinned: false }
+    ParticleDesc {
+        position,
+        velocity: [0.0; 3],
+        mass,
+        pinned: false,
+    }
 }
 
 fn spring(a: usize, b: usize, stiffness: f64, damping: f64, kind: SpringKind) -> SpringDesc {
-    SpringDesc { a, b, stiffness, damping, rest_length: None, law: SpringLaw::Hooke, kind }
+    SpringDesc {
+        a,
+        b,
+        stiffness,
+        damping,
+        rest_length: None,
+        law: SpringLaw::Hooke,
+        kind,
+    }
 }
 
 /// The circle system's usual start, `(1, 0, 0)`.
@@ -93,8 +112,16 @@ pub fn chain(p: &ChainParams) -> Result<Scene, BuildError> {
     check_count("chain", p.particles, 2)?;
     let d = p.direction;
     let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    let d = if dn > 0.0 { [d[0] / dn, d[1] / dn, d[2] / dn] } else { [0.0, -1.0, 0.0] };
-    let mut s = Scene { name: "pendulum".into(), drag: p.drag, ..Default::default() };
+    let d = if dn > 0.0 {
+        [d[0] / dn, d[1] / dn, d[2] / dn]
+    } else {
+        [0.0, -1.0, 0.0]
+    };
+    let mut s = Scene {
+        name: "pendulum".into(),
+        drag: p.drag,
+        ..Default::default()
+    };
     if p.gravity {
         s.gravity = [0.0, -G, 0.0];
     }
@@ -104,7 +131,13 @@ pub fn chain(p: &ChainParams) -> Result<Scene, BuildError> {
         q.pinned = i == 0;
         s.particles.push(q);
         if i > 0 {
-            s.springs.push(spring(i - 1, i, p.stiffness, p.damping, SpringKind::Structural));
+            s.springs.push(spring(
+                i - 1,
+                i,
+                p.stiffness,
+                p.damping,
+                SpringKind::Structural,
+            ));
         }
     }
     Ok(s)
@@ -113,11 +146,23 @@ pub fn chain(p: &ChainParams) -> Result<Scene, BuildError> {
 /// A single pendulum: one particle on a stiff spring of length `length` from a fixed point,
 /// started at angle `angle` (rad) from the vertical, in the x–y plane.
 pub fn pendulum(length: f64, mass: f64, stiffness: f64, angle: f64) -> Scene {
-    let mut s = Scene { name: "single_pendulum".into(), gravity: [0.0, -G, 0.0], ..Default::default() };
-    s.particles.push(ParticleDesc { position: [0.0; 3], velocity: [0.0; 3], mass, pinned: true });
+    let mut s = Scene {
+        name: "single_pendulum".into(),
+        gravity: [0.0, -G, 0.0],
+        ..Default::default()
+    };
+    s.particles.push(ParticleDesc {
+        position: [0.0; 3],
+        velocity: [0.0; 3],
+        mass,
+        pinned: true,
+    });
     // Start at the static stretch so that the spring does not bounce: L_rest = L − m g / k.
     let rest = length - mass * G / stiffness;
-    s.particles.push(particle([length * angle.sin(), -length * angle.cos(), 0.0], mass));
+    s.particles.push(particle(
+        [length * angle.sin(), -length * angle.cos(), 0.0],
+        mass,
+    ));
     let mut sp = spring(0, 1, stiffness, 0.0, SpringKind::Structural);
     sp.rest_length = Some(rest);
     s.springs.push(sp);
@@ -203,7 +248,11 @@ impl ClothParams {
     /// `(N−2)M + N(M−2)`.
     pub fn spring_counts(&self) -> (usize, usize, usize) {
         let (n, m) = (self.rows, self.cols);
-        ((n - 1) * m + n * (m - 1), 2 * (n - 1) * (m - 1), (n - 2) * m + n * (m - 2))
+        (
+            (n - 1) * m + n * (m - 1),
+            2 * (n - 1) * (m - 1),
+            (n - 2) * m + n * (m - 2),
+        )
     }
 
     /// The same cloth material at another resolution: mass per particle scales with the area
@@ -211,7 +260,9 @@ impl ClothParams {
     /// stays the same (springs in series), from this cloth as the reference.
     pub fn resized(&self, rows: usize, cols: usize) -> Self {
         let area = (self.rows * self.cols) as f64 / (rows * cols) as f64;
-        let stretch = ((rows - 1) as f64 / (self.rows - 1) as f64 + (cols - 1) as f64 / (self.cols - 1) as f64) / 2.0;
+        let stretch = ((rows - 1) as f64 / (self.rows - 1) as f64
+            + (cols - 1) as f64 / (self.cols - 1) as f64)
+            / 2.0;
         // k per spring ∝ length⁻¹ for a fixed sheet stiffness; forces per row ∝ 1/count.
         let k = stretch * (self.rows + self.cols) as f64 / (rows + cols) as f64;
         Self {
@@ -231,11 +282,19 @@ impl ClothParams {
 /// A cloth grid.
 pub fn cloth(p: &ClothParams) -> Result<Scene, BuildError> {
     if p.rows < 3 || p.cols < 3 {
-        return Err(BuildError(format!("cloth: needs at least 3×3 particles, got {}×{}", p.rows, p.cols)));
+        return Err(BuildError(format!(
+            "cloth: needs at least 3×3 particles, got {}×{}",
+            p.rows, p.cols
+        )));
     }
     check_count("cloth", p.rows.saturating_mul(p.cols), 9)?;
     let (n, m) = (p.rows, p.cols);
-    let mut s = Scene { name: "cloth".into(), gravity: [0.0, -G, 0.0], drag: p.drag, ..Default::default() };
+    let mut s = Scene {
+        name: "cloth".into(),
+        gravity: [0.0, -G, 0.0],
+        drag: p.drag,
+        ..Default::default()
+    };
     let o = p.origin;
     let mut uvs = Vec::with_capacity(n * m);
     for i in 0..n {
@@ -243,7 +302,11 @@ pub fn cloth(p: &ClothParams) -> Result<Scene, BuildError> {
             let u = j as f64 / (m - 1) as f64;
             let v = i as f64 / (n - 1) as f64;
             let x = o[0] + (u - 0.5) * p.width;
-            let pos = if p.hanging { [x, o[1] - v * p.height, o[2]] } else { [x, o[1], o[2] + (v - 0.5) * p.height] };
+            let pos = if p.hanging {
+                [x, o[1] - v * p.height, o[2]]
+            } else {
+                [x, o[1], o[2] + (v - 0.5) * p.height]
+            };
             s.particles.push(particle(pos, p.mass));
             uvs.push([u as f32, v as f32]);
         }
@@ -267,45 +330,94 @@ pub fn cloth(p: &ClothParams) -> Result<Scene, BuildError> {
     for i in 0..n {
         for j in 0..m {
             if i + 1 < n {
-                s.springs.push(spring(idx(i, j), idx(i + 1, j), p.k_structural, b, SpringKind::Structural));
+                s.springs.push(spring(
+                    idx(i, j),
+                    idx(i + 1, j),
+                    p.k_structural,
+                    b,
+                    SpringKind::Structural,
+                ));
             }
             if j + 1 < m {
-                s.springs.push(spring(idx(i, j), idx(i, j + 1), p.k_structural, b, SpringKind::Structural));
+                s.springs.push(spring(
+                    idx(i, j),
+                    idx(i, j + 1),
+                    p.k_structural,
+                    b,
+                    SpringKind::Structural,
+                ));
             }
         }
     }
     for i in 0..n - 1 {
         for j in 0..m - 1 {
-            s.springs.push(spring(idx(i, j), idx(i + 1, j + 1), p.k_shear, b, SpringKind::Shear));
-            s.springs.push(spring(idx(i, j + 1), idx(i + 1, j), p.k_shear, b, SpringKind::Shear));
+            s.springs.push(spring(
+                idx(i, j),
+                idx(i + 1, j + 1),
+                p.k_shear,
+                b,
+                SpringKind::Shear,
+            ));
+            s.springs.push(spring(
+                idx(i, j + 1),
+                idx(i + 1, j),
+                p.k_shear,
+                b,
+                SpringKind::Shear,
+            ));
         }
     }
     for i in 0..n {
         for j in 0..m {
             if i + 2 < n {
-                s.springs.push(spring(idx(i, j), idx(i + 2, j), p.k_flex, b, SpringKind::Flex));
+                s.springs.push(spring(
+                    idx(i, j),
+                    idx(i + 2, j),
+                    p.k_flex,
+                    b,
+                    SpringKind::Flex,
+                ));
             }
             if j + 2 < m {
-                s.springs.push(spring(idx(i, j), idx(i, j + 2), p.k_flex, b, SpringKind::Flex));
+                s.springs.push(spring(
+                    idx(i, j),
+                    idx(i, j + 2),
+                    p.k_flex,
+                    b,
+                    SpringKind::Flex,
+                ));
             }
         }
     }
     let mut tris = Vec::with_capacity(2 * (n - 1) * (m - 1));
     for i in 0..n - 1 {
         for j in 0..m - 1 {
-            let (a, b, c, d) = (idx(i, j) as u32, idx(i, j + 1) as u32, idx(i + 1, j) as u32, idx(i + 1, j + 1) as u32);
+            let (a, b, c, d) = (
+                idx(i, j) as u32,
+                idx(i, j + 1) as u32,
+                idx(i + 1, j) as u32,
+                idx(i + 1, j + 1) as u32,
+            );
             // Counter-clockwise seen from +z (hanging) and from +y (lying).
             tris.push([a, c, b]);
             tris.push([b, c, d]);
         }
     }
-    s.surface = Some(Surface { triangles: tris, uvs });
+    s.surface = Some(Surface {
+        triangles: tris,
+        uvs,
+    });
     Ok(s)
 }
 
 /// The cloth-and-sphere scene: a hanging cloth held by its top corners and a sphere swinging
 /// back and forth through it along z.
-pub fn cloth_sphere(p: &ClothParams, radius: f64, amplitude: f64, period: f64) -> Result<Scene, BuildError> {
+pub fn cloth_sphere(
+    p: &ClothParams,
+    radius: f64,
+    amplitude: f64,
+    period: f64,
+) -> Result<Scene, BuildError> {
     let mut s = cloth(p)?;
     s.name = "cloth_sphere".into();
     let center = [p.origin[0], p.origin[1] - 0.55 * p.height, p.origin[2]];
@@ -318,7 +430,12 @@ pub fn cloth_sphere(p: &ClothParams, radius: f64, amplitude: f64, period: f64) -
             phase: 0.0,
         },
         rotation: [0.0, 0.0, 0.0, 1.0],
-        material: ContactMaterial { friction: 0.2, restitution: 0.0, thickness: 0.02, bounce_threshold: 0.05 },
+        material: ContactMaterial {
+            friction: 0.2,
+            restitution: 0.0,
+            thickness: 0.02,
+            bounce_threshold: 0.05,
+        },
     });
     Ok(s)
 }
@@ -330,9 +447,14 @@ pub fn wire(n: usize, frame_time: f64, frames: u32) -> Result<Scene, BuildError>
     check_count("wire", n, 2)?;
     let mass = 1.0 / n as f64;
     let rest = 1.0 / (n - 1) as f64;
-    let mut s = Scene { name: "wire".into(), gravity: [0.0, -G, 0.0], ..Default::default() };
+    let mut s = Scene {
+        name: "wire".into(),
+        gravity: [0.0, -G, 0.0],
+        ..Default::default()
+    };
     for p in 0..n {
-        s.particles.push(particle([0.0, -(p as f64) * rest, 0.5], mass));
+        s.particles
+            .push(particle([0.0, -(p as f64) * rest, 0.5], mass));
         if p > 0 {
             s.springs.push(SpringDesc {
                 a: p - 1,
@@ -345,7 +467,10 @@ pub fn wire(n: usize, frame_time: f64, frames: u32) -> Result<Scene, BuildError>
             });
         }
     }
-    s.motions.push(MotionDesc { particle: 0, motion: Motion::physbam_wire_endpoint(frame_time * frames as f64) });
+    s.motions.push(MotionDesc {
+        particle: 0,
+        motion: Motion::physbam_wire_endpoint(frame_time * frames as f64),
+    });
     Ok(s)
 }
 
@@ -353,10 +478,21 @@ pub fn wire(n: usize, frame_time: f64, frames: u32) -> Result<Scene, BuildError>
 /// pair of particles on a common row, column or diagonal of a layer, and each particle to the
 /// four corners of the square below it in every lower layer. Dropped from `drop_height` onto
 /// a ground plane with restitution 0.8 and friction 0.3.
-pub fn pyramid(layers: usize, spacing: f64, mass: f64, stiffness: f64, damping: f64, drop_height: f64) -> Result<Scene, BuildError> {
+pub fn pyramid(
+    layers: usize,
+    spacing: f64,
+    mass: f64,
+    stiffness: f64,
+    damping: f64,
+    drop_height: f64,
+) -> Result<Scene, BuildError> {
     let count: usize = (1..=layers).map(|k| k * k).sum();
     check_count("pyramid", count, 1)?;
-    let mut s = Scene { name: "pyramid".into(), gravity: [0.0, -G, 0.0], ..Default::default() };
+    let mut s = Scene {
+        name: "pyramid".into(),
+        gravity: [0.0, -G, 0.0],
+        ..Default::default()
+    };
     let layer_h = spacing / std::f64::consts::SQRT_2;
     let mut start = Vec::with_capacity(layers + 1);
     for k in 1..=layers {
@@ -378,23 +514,53 @@ pub fn pyramid(layers: usize, spacing: f64, mass: f64, stiffness: f64, damping: 
                 // Same layer: all further particles along the row, column and diagonals.
                 for d in 1..k {
                     if i + d < k {
-                        s.springs.push(spring(a, id(k, i + d, j), stiffness, damping, SpringKind::Structural));
+                        s.springs.push(spring(
+                            a,
+                            id(k, i + d, j),
+                            stiffness,
+                            damping,
+                            SpringKind::Structural,
+                        ));
                     }
                     if j + d < k {
-                        s.springs.push(spring(a, id(k, i, j + d), stiffness, damping, SpringKind::Structural));
+                        s.springs.push(spring(
+                            a,
+                            id(k, i, j + d),
+                            stiffness,
+                            damping,
+                            SpringKind::Structural,
+                        ));
                     }
                     if i + d < k && j + d < k {
-                        s.springs.push(spring(a, id(k, i + d, j + d), stiffness, damping, SpringKind::Shear));
+                        s.springs.push(spring(
+                            a,
+                            id(k, i + d, j + d),
+                            stiffness,
+                            damping,
+                            SpringKind::Shear,
+                        ));
                     }
                     if i + d < k && j >= d {
-                        s.springs.push(spring(a, id(k, i + d, j - d), stiffness, damping, SpringKind::Shear));
+                        s.springs.push(spring(
+                            a,
+                            id(k, i + d, j - d),
+                            stiffness,
+                            damping,
+                            SpringKind::Shear,
+                        ));
                     }
                 }
                 // Lower layers: the corners of the square of side d below.
                 for d in 1..=layers - k {
                     let kk = k + d;
                     for (di, dj) in [(0, 0), (d, 0), (0, d), (d, d)] {
-                        s.springs.push(spring(a, id(kk, i + di, j + dj), stiffness, damping, SpringKind::Structural));
+                        s.springs.push(spring(
+                            a,
+                            id(kk, i + di, j + dj),
+                            stiffness,
+                            damping,
+                            SpringKind::Structural,
+                        ));
                     }
                 }
             }
@@ -407,10 +573,19 @@ pub fn pyramid(layers: usize, spacing: f64, mass: f64, stiffness: f64, damping: 
 /// A ground plane `y = height`.
 pub fn ground(height: f64, restitution: f64, friction: f64) -> ColliderDesc {
     ColliderDesc {
-        shape: ShapeDesc::Plane { normal: [0.0, 1.0, 0.0] },
-        motion: Motion::Fixed { position: [0.0, height, 0.0] },
+        shape: ShapeDesc::Plane {
+            normal: [0.0, 1.0, 0.0],
+        },
+        motion: Motion::Fixed {
+            position: [0.0, height, 0.0],
+        },
         rotation: [0.0, 0.0, 0.0, 1.0],
-        material: ContactMaterial { friction, restitution, thickness: 0.0, bounce_threshold: 0.05 },
+        material: ContactMaterial {
+            friction,
+            restitution,
+            thickness: 0.0,
+            bounce_threshold: 0.05,
+        },
     }
 }
 
@@ -456,10 +631,16 @@ impl Default for JellyParams {
 pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
     let [nx, ny, nz] = p.size;
     if nx < 2 || ny < 2 || nz < 2 {
-        return Err(BuildError("jelly: needs at least 2 particles along each axis".into()));
+        return Err(BuildError(
+            "jelly: needs at least 2 particles along each axis".into(),
+        ));
     }
     check_count("jelly", nx.saturating_mul(ny).saturating_mul(nz), 8)?;
-    let mut s = Scene { name: "jelly".into(), gravity: [0.0, -G, 0.0], ..Default::default() };
+    let mut s = Scene {
+        name: "jelly".into(),
+        gravity: [0.0, -G, 0.0],
+        ..Default::default()
+    };
     let id = |x: usize, y: usize, z: usize| (x * ny + y) * nz + z;
     let h = p.spacing;
     let half = [(nx - 1) as f64 * h / 2.0, 0.0, (nz - 1) as f64 * h / 2.0];
@@ -467,7 +648,11 @@ pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
         for y in 0..ny {
             for z in 0..nz {
                 s.particles.push(particle(
-                    [x as f64 * h - half[0], p.drop_height + y as f64 * h, z as f64 * h - half[2]],
+                    [
+                        x as f64 * h - half[0],
+                        p.drop_height + y as f64 * h,
+                        z as f64 * h - half[2],
+                    ],
                     p.mass,
                 ));
             }
@@ -493,9 +678,18 @@ pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
                                 continue;
                             }
                             let nonzero = o.iter().filter(|v| **v != 0).count();
-                            let (k, kind) =
-                                if nonzero == 1 { (p.stiffness[0], SpringKind::Structural) } else { (p.stiffness[1], SpringKind::Shear) };
-                            s.springs.push(spring(a, id(q[0] as usize, q[1] as usize, q[2] as usize), k, p.damping, kind));
+                            let (k, kind) = if nonzero == 1 {
+                                (p.stiffness[0], SpringKind::Structural)
+                            } else {
+                                (p.stiffness[1], SpringKind::Shear)
+                            };
+                            s.springs.push(spring(
+                                a,
+                                id(q[0] as usize, q[1] as usize, q[2] as usize),
+                                k,
+                                p.damping,
+                                kind,
+                            ));
                         }
                     }
                 }
@@ -503,7 +697,13 @@ pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
                     let mut q = c;
                     q[axis] += 2;
                     if inside(q) {
-                        s.springs.push(spring(a, id(q[0] as usize, q[1] as usize, q[2] as usize), p.stiffness[2], p.damping, SpringKind::Flex));
+                        s.springs.push(spring(
+                            a,
+                            id(q[0] as usize, q[1] as usize, q[2] as usize),
+                            p.stiffness[2],
+                            p.damping,
+                            SpringKind::Flex,
+                        ));
                     }
                 }
             }
@@ -517,26 +717,59 @@ pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
     };
     for y in 0..ny - 1 {
         for z in 0..nz - 1 {
-            quad(id(0, y, z), id(0, y, z + 1), id(0, y + 1, z + 1), id(0, y + 1, z));
+            quad(
+                id(0, y, z),
+                id(0, y, z + 1),
+                id(0, y + 1, z + 1),
+                id(0, y + 1, z),
+            );
             let x = nx - 1;
-            quad(id(x, y, z), id(x, y + 1, z), id(x, y + 1, z + 1), id(x, y, z + 1));
+            quad(
+                id(x, y, z),
+                id(x, y + 1, z),
+                id(x, y + 1, z + 1),
+                id(x, y, z + 1),
+            );
         }
     }
     for x in 0..nx - 1 {
         for z in 0..nz - 1 {
-            quad(id(x, 0, z), id(x + 1, 0, z), id(x + 1, 0, z + 1), id(x, 0, z + 1));
+            quad(
+                id(x, 0, z),
+                id(x + 1, 0, z),
+                id(x + 1, 0, z + 1),
+                id(x, 0, z + 1),
+            );
             let y = ny - 1;
-            quad(id(x, y, z), id(x, y, z + 1), id(x + 1, y, z + 1), id(x + 1, y, z));
+            quad(
+                id(x, y, z),
+                id(x, y, z + 1),
+                id(x + 1, y, z + 1),
+                id(x + 1, y, z),
+            );
         }
     }
     for x in 0..nx - 1 {
         for y in 0..ny - 1 {
-            quad(id(x, y, 0), id(x, y + 1, 0), id(x + 1, y + 1, 0), id(x + 1, y, 0));
+            quad(
+                id(x, y, 0),
+                id(x, y + 1, 0),
+                id(x + 1, y + 1, 0),
+                id(x + 1, y, 0),
+            );
             let z = nz - 1;
-            quad(id(x, y, z), id(x + 1, y, z), id(x + 1, y + 1, z), id(x, y + 1, z));
+            quad(
+                id(x, y, z),
+                id(x + 1, y, z),
+                id(x + 1, y + 1, z),
+                id(x, y + 1, z),
+            );
         }
     }
-    s.surface = Some(Surface { triangles: tris, uvs: Vec::new() });
+    s.surface = Some(Surface {
+        triangles: tris,
+        uvs: Vec::new(),
+    });
     s.colliders.push(ground(0.0, p.restitution, p.friction));
     Ok(s)
 }

@@ -65,7 +65,15 @@ impl Springs {
     }
 
     /// Adds a spring. Indices must be valid for the model that uses it (the model checks).
-    pub fn push(&mut self, i: usize, j: usize, rest: Scalar, k: Scalar, damping: Scalar, law: SpringLaw) {
+    pub fn push(
+        &mut self,
+        i: usize,
+        j: usize,
+        rest: Scalar,
+        k: Scalar,
+        damping: Scalar,
+        law: SpringLaw,
+    ) {
         self.springs.push(PackedSpring {
             i: i as u32,
             j: j as u32,
@@ -141,7 +149,11 @@ impl Springs {
                 let d = x[i] - x[j];
                 let l = d.length();
                 // −k (l − L) d/l = d·(k (L/l − 1)); zero-length springs exert nothing.
-                let c = if l > 0.0 { s.k * (s.rest / l - 1.0) } else { 0.0 };
+                let c = if l > 0.0 {
+                    s.k * (s.rest / l - 1.0)
+                } else {
+                    0.0
+                };
                 let fi = d * c;
                 f[i] += fi;
                 f[j] -= fi;
@@ -162,6 +174,10 @@ impl Springs {
 
     /// Largest index referenced plus one (0 when empty).
     pub fn max_index(&self) -> usize {
-        self.springs.iter().map(|s| s.i.max(s.j) as usize + 1).max().unwrap_or(0)
+        self.springs
+            .iter()
+            .map(|s| s.i.max(s.j) as usize + 1)
+            .max()
+            .unwrap_or(0)
     }
 }

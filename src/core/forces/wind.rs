@@ -29,7 +29,14 @@ pub struct Wind {
 
 impl Default for Wind {
     fn default() -> Self {
-        Self { velocity: [1.0, 0.0, 0.5], gust: 1.0, frequency: 0.5, coefficient: 0.01, seed: 1, enabled: true }
+        Self {
+            velocity: [1.0, 0.0, 0.5],
+            gust: 1.0,
+            frequency: 0.5,
+            coefficient: 0.01,
+            seed: 1,
+            enabled: true,
+        }
     }
 }
 
@@ -66,7 +73,8 @@ impl Wind {
         for a in 0..3 {
             for k in 0..3 {
                 // Frequencies spread over [0.5, 1.5] × the typical one, phases uniform.
-                omega[a][k] = (std::f64::consts::TAU * self.frequency * (0.5 + unit(&mut st))) as Scalar;
+                omega[a][k] =
+                    (std::f64::consts::TAU * self.frequency * (0.5 + unit(&mut st))) as Scalar;
                 phase[a][k] = (std::f64::consts::TAU * unit(&mut st)) as Scalar;
             }
         }

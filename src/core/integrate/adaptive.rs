@@ -24,7 +24,12 @@ pub struct AdaptiveConfig {
 
 impl Default for AdaptiveConfig {
     fn default() -> Self {
-        Self { rtol: 1e-4, atol: 1e-6, h_min: 1e-10, safety: 0.9 }
+        Self {
+            rtol: 1e-4,
+            atol: 1e-6,
+            h_min: 1e-10,
+            safety: 0.9,
+        }
     }
 }
 
@@ -126,7 +131,13 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
         IntegratorKind::Rk45
     }
 
-    fn step(&mut self, sys: &Sys, t: Scalar, h_max: Scalar, x: &mut S) -> Result<Scalar, StepError> {
+    fn step(
+        &mut self,
+        sys: &Sys,
+        t: Scalar,
+        h_max: Scalar,
+        x: &mut S,
+    ) -> Result<Scalar, StepError> {
         check_h(h_max)?;
         self.ensure_scratch(x);
         let (atol, rtol) = (s(self.cfg.atol), s(self.cfg.rtol));
@@ -157,7 +168,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
                 // Hairer's starting step (HINIT), in the scaled norm.
                 let d0 = S::error_norm(x, x, x, atol, rtol);
                 let d1 = S::error_norm(k1, x, x, atol, rtol);
-                let h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 } else { 0.01 * d0 / d1 };
+                let h0 = if d0 < 1e-5 || d1 < 1e-5 {
+                    1e-6
+                } else {
+                    0.01 * d0 / d1
+                };
                 let h0 = h0.min(h_max);
                 tmp.copy_from(x);
                 tmp.axpy(h0, k1);
@@ -166,7 +181,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
                 k2.axpy(-1.0, k1);
                 let d2 = S::error_norm(k2, x, x, atol, rtol) / h0;
                 let dm = d1.max(d2);
-                let h1 = if dm <= 1e-15 { (h0 * 1e-3).max(1e-6) } else { (0.01 / dm).powf(0.2) };
+                let h1 = if dm <= 1e-15 {
+                    (h0 * 1e-3).max(1e-6)
+                } else {
+                    (0.01 / dm).powf(0.2)
+                };
                 (100.0 * h0).min(h1).min(h_max)
             }
         };
@@ -228,11 +247,16 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
             let fac11 = err.powf(EXPO1);
             if err <= 1.0 {
                 // Accept.
-                let fac = (fac11 / self.err_old.powf(BETA) / self.cfg.safety).clamp(1.0 / FAC_MAX, 1.0 / FAC_MIN);
+                let fac = (fac11 / self.err_old.powf(BETA) / self.cfg.safety)
+                    .clamp(1.0 / FAC_MAX, 1.0 / FAC_MIN);
                 let h_new = h / fac as Scalar;
                 self.err_old = err.max(1e-4);
                 let capped = self.h_est.is_some_and(|he| h < he);
-                self.h_est = Some(if capped { h_new.max(self.h_est.unwrap()) } else { h_new });
+                self.h_est = Some(if capped {
+                    h_new.max(self.h_est.unwrap())
+                } else {
+                    h_new
+                });
                 x.copy_from(y);
                 std::mem::swap(k1, k7);
                 last.copy_from(x);
@@ -243,7 +267,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
             }
             // Reject: shrink, never grow, after a rejection.
             self.stats.rejected += 1;
-            let fac = if err.is_finite() { (fac11 / self.cfg.safety).min(1.0 / FAC_MIN) } else { 10.0 };
+            let fac = if err.is_finite() {
+                (fac11 / self.cfg.safety).min(1.0 / FAC_MIN)
+            } else {
+                10.0
+            };
             h /= fac as Scalar;
             self.h_est = Some(h);
         }

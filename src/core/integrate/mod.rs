@@ -155,7 +155,9 @@ impl FromStr for IntegratorKind {
         let l = s.trim().to_ascii_lowercase().replace(['-', ' '], "_");
         let k = match l.as_str() {
             "e" | "euler" | "forward_euler" | "explicit_euler" => Self::ForwardEuler,
-            "s" | "symplectic" | "symplectic_euler" | "semi_implicit_euler" => Self::SymplecticEuler,
+            "s" | "symplectic" | "symplectic_euler" | "semi_implicit_euler" => {
+                Self::SymplecticEuler
+            }
             "t" | "trapezoid" | "trapezoidal" | "heun" => Self::Trapezoid,
             "m" | "midpoint" => Self::Midpoint,
             "r" | "rk4" | "runge_kutta" => Self::Rk4,
@@ -185,10 +187,17 @@ impl fmt::Display for StepError {
         match self {
             Self::BadStepSize(h) => write!(f, "step size {h} is not a positive finite number"),
             Self::StepSizeUnderflow { h } => {
-                write!(f, "adaptive step size fell to {h:e} to meet the tolerance (stiff or diverging system)")
+                write!(
+                    f,
+                    "adaptive step size fell to {h:e} to meet the tolerance (stiff or diverging system)"
+                )
             }
             Self::NeedsSecondOrder(k) => {
-                write!(f, "{} needs a second-order (position, velocity) state", k.label())
+                write!(
+                    f,
+                    "{} needs a second-order (position, velocity) state",
+                    k.label()
+                )
             }
         }
     }
@@ -216,7 +225,8 @@ pub trait Integrator<S: OdeState, Sys: OdeSystem<S> + ?Sized>: Send + Sync {
     /// Fixed-step methods always take `h`; adaptive ones take the largest step their error
     /// control accepts, never more than `h` (so the caller can land on frame boundaries).
     /// On error the state is unchanged.
-    fn step(&mut self, sys: &Sys, t: Scalar, h: Scalar, state: &mut S) -> Result<Scalar, StepError>;
+    fn step(&mut self, sys: &Sys, t: Scalar, h: Scalar, state: &mut S)
+    -> Result<Scalar, StepError>;
 
     /// Counters since construction or the last reset.
     fn stats(&self) -> IntegratorStats;
@@ -227,7 +237,11 @@ pub trait Integrator<S: OdeState, Sys: OdeSystem<S> + ?Sized>: Send + Sync {
 
 /// Checks a step size.
 pub(crate) fn check_h(h: Scalar) -> Result<(), StepError> {
-    if h.is_finite() && h > 0.0 { Ok(()) } else { Err(StepError::BadStepSize(h)) }
+    if h.is_finite() && h > 0.0 {
+        Ok(())
+    } else {
+        Err(StepError::BadStepSize(h))
+    }
 }
 
 /// Returns the scratch slot, cloning `like` into it the first time (the only allocation an
