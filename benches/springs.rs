@@ -4,6 +4,9 @@
 //! `cargo bench --bench springs` (f32) and `cargo bench --bench springs --features f64`.
 //! Criterion reports throughput in elements (springs) per second; ns per spring = 1e9 / that.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::ode::OdeSystem;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};

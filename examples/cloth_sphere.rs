@@ -21,6 +21,9 @@
 //! state; it shows what the numerics do before the ECS plugin (components per particle and
 //! spring) exists.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy::asset::RenderAssetUsages;
 use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;

@@ -17,6 +17,9 @@
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
 //! `--no-guard`, `--obj`, `--out DIR`, `--quiet`.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::ode::OdeSystem;
 use bevy_soft_body::prelude::*;
 use std::fmt::Write as _;
@@ -94,7 +97,7 @@ fn parse_args() -> Result<Args, String> {
     if !(a.h.is_finite() && a.h > 0.0) {
         return Err(format!("--h must be a positive number, got {}", a.h));
     }
-    if !(a.duration.is_finite() && a.duration >= 0.0) || !(a.fps.is_finite() && a.fps > 0.0) {
+    if !(a.duration.is_finite() && a.duration >= 0.0 && a.fps.is_finite() && a.fps > 0.0) {
         return Err("--duration must be ≥ 0 and --fps > 0".into());
     }
     Ok(a)

@@ -23,6 +23,10 @@
 //! assert!(sim.state.x[3].y < 0.0); // the chain swung down
 //! ```
 
+// `Scalar` is f32 or f64 by feature, so a cast to or from it is a no-op in one build and
+// needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 pub mod core;
 pub mod math;
 

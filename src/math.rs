@@ -46,12 +46,14 @@ pub fn to_f64(v: Vector) -> [f64; 3] {
 
 /// Converts a [`Vector`] to Bevy's / parry's `f32` vector.
 #[inline(always)]
+#[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a narrowing in the f64 one
 pub fn to_f32(v: Vector) -> glam::Vec3 {
     glam::Vec3::new(v.x as f32, v.y as f32, v.z as f32)
 }
 
 /// Converts an `f32` vector (Bevy's, parry's) to a [`Vector`].
 #[inline(always)]
+#[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a widening in the f64 one
 pub fn from_f32(v: glam::Vec3) -> Vector {
     Vector::new(v.x as Scalar, v.y as Scalar, v.z as Scalar)
 }

@@ -6,6 +6,9 @@
 //! tests on larger steps so that truncation error stays well above f32 round-off (≈1e-7
 //! relative), with the same ±0.15 order band.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::integrate::{AdaptiveConfig, Integrator};
 use bevy_soft_body::core::ode::{CircleSystem, FnSystem, OdeState, OdeSystem, ParticleState};
 use bevy_soft_body::prelude::*;

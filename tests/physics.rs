@@ -2,6 +2,9 @@
 //! symplectic and forward Euler, momentum conservation of internal forces, gravity and drag
 //! against closed forms, prescribed motion.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::integrate::{AdaptiveConfig, Integrator};
 use bevy_soft_body::core::scene::{ParticleDesc, SpringDesc};
 use bevy_soft_body::prelude::*;

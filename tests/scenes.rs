@@ -1,6 +1,9 @@
 //! Builders, the JSON layout format, the driver's frame bookkeeping and divergence detection,
 //! and the seed assignment's claims about the cloth.
 
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::scene::SpringKind;
 use bevy_soft_body::prelude::*;
 

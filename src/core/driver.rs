@@ -246,7 +246,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             }
             if let Some(bound) = self.energy_bound {
                 let k = self.system.kinetic_energy(&self.state);
-                if !(k <= bound) {
+                if k.is_nan() || k > bound {
                     self.state.copy_from(&self.backup);
                     return Err(fail(
                         DivergenceReason::EnergyBlowup {

@@ -320,15 +320,18 @@ impl Scene {
                 err(format!("forces[{k}].force"), "must be finite");
             }
         }
-        if let Some(w) = &self.wind {
-            if !(finite3(&w.velocity) && w.gust.is_finite() && w.frequency.is_finite())
-                || !(w.coefficient.is_finite() && w.coefficient >= 0.0)
-            {
-                err(
-                    "wind".into(),
-                    "numbers must be finite and the coefficient non-negative",
-                );
-            }
+        let wind_ok = |w: &Wind| {
+            finite3(&w.velocity)
+                && w.gust.is_finite()
+                && w.frequency.is_finite()
+                && w.coefficient.is_finite()
+                && w.coefficient >= 0.0
+        };
+        if self.wind.as_ref().is_some_and(|w| !wind_ok(w)) {
+            err(
+                "wind".into(),
+                "numbers must be finite and the coefficient non-negative",
+            );
         }
         for (k, c) in self.colliders.iter().enumerate() {
             if !c.shape.is_valid() {

@@ -56,6 +56,8 @@ pub struct PackedSpring {
 pub struct Springs {
     springs: Vec<PackedSpring>,
     damped: usize,
+    /// One more than the largest particle index referenced (0 when empty).
+    bound: usize,
 }
 
 impl Springs {
@@ -84,6 +86,7 @@ impl Springs {
         if damping != 0.0 {
             self.damped += 1;
         }
+        self.bound = self.bound.max(i.max(j) + 1);
     }
 
     /// Number of springs.
@@ -104,20 +107,22 @@ impl Springs {
     /// Mutable access (stiffness changes at run time). Call [`Springs::refresh`] after
     /// changing damping.
     pub fn as_mut_slice(&mut self) -> &mut [PackedSpring] {
+        // Indices may change through this slice: the bound is recomputed on the next
+        // `accumulate` (or exactly by `refresh`).
+        self.bound = usize::MAX;
         &mut self.springs
     }
 
-    /// Recounts damped springs after edits.
+    /// Recounts damped springs and the index bound after edits.
     pub fn refresh(&mut self) {
         self.damped = self.springs.iter().filter(|s| s.damping != 0.0).count();
+        self.bound = self.max_index();
     }
 
     /// Removes the spring at `index` (order of the others is kept).
     pub fn remove(&mut self, index: usize) -> PackedSpring {
         let s = self.springs.remove(index);
-        if s.damping != 0.0 {
-            self.damped -= 1;
-        }
+        self.refresh();
         s
     }
 
@@ -126,37 +131,58 @@ impl Springs {
         self.damped > 0
     }
 
-    /// Adds spring (and damper) forces into `f`. `x`, `v` and `f` have one entry per particle
-    /// and every spring index is below their length (checked by the model at build time).
+    /// Adds spring (and damper) forces into `f`. `x`, `v` and `f` have one entry per particle.
+    ///
+    /// # Panics
+    /// If the slices differ in length or a spring refers past their end (a model that passed
+    /// `validate` never does).
     pub fn accumulate(&self, x: &[Vector], v: &[Vector], f: &mut [Vector]) {
         let n = x.len();
-        assert!(v.len() == n && f.len() == n);
-        if self.damped > 0 {
-            for s in &self.springs {
-                let (i, j) = (s.i as usize, s.j as usize);
-                let d = x[i] - x[j];
-                let l = d.length();
-                let inv = if l > 0.0 { 1.0 / l } else { 0.0 };
-                let nrm = d * inv;
-                let mag = -s.k * (l - s.rest) - s.damping * nrm.dot(v[i] - v[j]);
-                let fi = nrm * mag;
-                f[i] += fi;
-                f[j] -= fi;
-            }
+        assert!(
+            v.len() == n && f.len() == n,
+            "state and force arrays differ in length"
+        );
+        let bound = if self.bound == usize::MAX {
+            self.max_index()
         } else {
-            for s in &self.springs {
-                let (i, j) = (s.i as usize, s.j as usize);
-                let d = x[i] - x[j];
-                let l = d.length();
-                // −k (l − L) d/l = d·(k (L/l − 1)); zero-length springs exert nothing.
-                let c = if l > 0.0 {
-                    s.k * (s.rest / l - 1.0)
-                } else {
-                    0.0
-                };
-                let fi = d * c;
-                f[i] += fi;
-                f[j] -= fi;
+            self.bound
+        };
+        assert!(
+            bound <= n,
+            "a spring refers to particle {} of {n}",
+            bound.saturating_sub(1)
+        );
+        let (xp, vp, fp) = (x.as_ptr(), v.as_ptr(), f.as_mut_ptr());
+        // SAFETY: every index is below `bound <= n`, the length of all three slices (checked
+        // above), and `f` is exclusively borrowed for the whole loop.
+        unsafe {
+            if self.damped > 0 {
+                for s in &self.springs {
+                    let (i, j) = (s.i as usize, s.j as usize);
+                    let d = *xp.add(i) - *xp.add(j);
+                    let l = d.length();
+                    // Zero-length springs have no direction and exert nothing.
+                    let nrm = d * if l > 0.0 { 1.0 / l } else { 0.0 };
+                    let mag = -s.k * (l - s.rest) - s.damping * nrm.dot(*vp.add(i) - *vp.add(j));
+                    let fi = nrm * mag;
+                    *fp.add(i) += fi;
+                    *fp.add(j) -= fi;
+                }
+            } else {
+                for s in &self.springs {
+                    let (i, j) = (s.i as usize, s.j as usize);
+                    let d = *xp.add(i) - *xp.add(j);
+                    let l = d.length();
+                    // −k (l − L) d/l = d·k (L/l − 1).
+                    let c = if l > 0.0 {
+                        s.k * (s.rest / l - 1.0)
+                    } else {
+                        0.0
+                    };
+                    let fi = d * c;
+                    *fp.add(i) += fi;
+                    *fp.add(j) -= fi;
+                }
             }
         }
     }
@@ -179,5 +205,31 @@ impl Springs {
             .map(|s| s.i.max(s.j) as usize + 1)
             .max()
             .unwrap_or(0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn zero_length_and_self_springs_exert_nothing() {
+        let mut s = Springs::new();
+        s.push(0, 1, 1.0, 10.0, 1.0, SpringLaw::Hooke);
+        s.push(1, 1, 1.0, 10.0, 1.0, SpringLaw::Hooke);
+        let x = vec![Vector::ONE; 2];
+        let v = vec![Vector::X, -Vector::X];
+        let mut f = vec![Vector::ZERO; 2];
+        s.accumulate(&x, &v, &mut f);
+        assert!(f.iter().all(|f| *f == Vector::ZERO));
+    }
+
+    #[test]
+    #[should_panic(expected = "refers to particle")]
+    fn out_of_range_spring_is_caught_before_any_access() {
+        let mut s = Springs::new();
+        s.push(0, 5, 1.0, 10.0, 0.0, SpringLaw::Hooke);
+        let x = vec![Vector::ZERO; 3];
+        s.accumulate(&x, &x.clone(), &mut x.clone());
     }
 }

@@ -191,7 +191,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for DormandPrin
         };
 
         loop {
-            if !(h >= s(self.cfg.h_min)) {
+            if h.is_nan() || h < s(self.cfg.h_min) {
                 self.fsal = false;
                 return Err(StepError::StepSizeUnderflow { h });
             }

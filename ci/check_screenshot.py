@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""Checks a cloth_sphere screenshot: the cloth and the sphere must both be visible.
+
+Pixel statistics against the known colours of the scene (no image libraries needed):
+- cloth: the red material (sRGB 0.85, 0.25, 0.22), lit: red clearly above green and blue;
+- sphere: the grey material (0.75, 0.78, 0.82), lit or shadowed: near-neutral, brighter than
+  the background (0.09, 0.10, 0.12) and outside the HUD window in the top-left corner.
+Thresholds are far below what a correct frame shows (7.7 % cloth, 0.46 % sphere in docs/cloth_sphere.png at
+1280×720) and far above what an empty or black frame shows (0 %).
+"""
+import struct
+import sys
+import zlib
+
+
+def read_png(path):
+    data = open(path, "rb").read()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", "not a PNG"
+    pos, idat, w = 8, b"", None
+    while pos < len(data):
+        n, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + n]
+        if kind == b"IHDR":
+            w, h, depth, ctype = struct.unpack(">IIBB", body[:10])
+            assert depth == 8 and ctype in (2, 6), f"unsupported PNG: depth {depth} colour type {ctype}"
+            bpp = 3 if ctype == 2 else 4
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + n
+    raw = zlib.decompress(idat)
+    stride = w * bpp
+    rows, prev = [], bytearray(stride)
+    for y in range(h):
+        f = raw[y * (stride + 1)]
+        line = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b = prev[i]
+            c = prev[i - bpp] if i >= bpp else 0
+            if f == 1:
+                line[i] = (line[i] + a) & 255
+            elif f == 2:
+                line[i] = (line[i] + b) & 255
+            elif f == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        rows.append(line)
+        prev = line
+    return w, h, bpp, rows
+
+
+def main(path):
+    w, h, bpp, rows = read_png(path)
+    cloth = sphere = 0
+    for y, line in enumerate(rows):
+        for x in range(w):
+            r, g, b = line[x * bpp], line[x * bpp + 1], line[x * bpp + 2]
+            if r > 90 and r > 1.6 * g and r > 1.6 * b:
+                cloth += 1
+            elif (x > 380 or y > 150) and 40 < r < 235 and abs(r - g) < 14 and abs(g - b) < 18:
+                sphere += 1
+    n = w * h
+    print(f"{path}: {w}x{h}, cloth {100 * cloth / n:.2f} %, sphere {100 * sphere / n:.2f} %")
+    ok = cloth > 0.02 * n and sphere > 0.002 * n
+    if not ok:
+        print("FAIL: cloth needs > 2 % of the pixels and the sphere > 0.2 %")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1]))
