@@ -1,12 +1,14 @@
-//! Precision switch: `Scalar`/`Vector` are `f32`/`Vec3` by default (Bevy's precision) and
+//! Precision switch: `Scalar`/`Vector` are `f32`/`Vec3A` by default (Bevy's precision) and
 //! `f64`/`DVec3` with the `f64` feature, for accuracy studies.
 
 #[cfg(not(feature = "f64"))]
 mod prec {
     /// The floating-point type of every simulated quantity.
     pub type Scalar = f32;
-    /// A 3-vector of [`Scalar`].
-    pub type Vector = glam::Vec3;
+    /// A 3-vector of [`Scalar`]: glam's 16-byte SIMD `Vec3A`, which made the spring kernel
+    /// 12–18 % faster than the 12-byte `Vec3` (docs/BENCHMARKS.md). Bevy's `Vec3` converts with
+    /// [`to_f32`](super::to_f32) / [`from_f32`](super::from_f32).
+    pub type Vector = glam::Vec3A;
     /// Name of the precision, printed on charts and tables.
     pub const PRECISION: &str = "f32";
 }
