@@ -9,9 +9,10 @@
 //! cargo run --release --example cloth_sphere -- t 0.001 --size 24
 //! ```
 //!
-//! Letters: e forward Euler, s symplectic Euler, t trapezoid, m midpoint, r RK4, a RK45.
+//! Letters: e forward Euler, s symplectic Euler, t trapezoid, m midpoint, r RK4, a RK45,
+//! i linearly implicit Euler (`cloth_sphere -- i 0.0166` takes one step per frame).
 //!
-//! Keys: Space pause/resume, R reset, E/S/T/M/K/A switch integrator (K = RK4),
+//! Keys: Space pause/resume, R reset, E/S/T/M/K/A/I switch integrator (K = RK4),
 //! Left/Right orbit the camera, Up/Down zoom.
 //!
 //! `--screenshot FILE [--frames N]` renders N frames of exactly 1/60 s each (default 270, the
@@ -311,6 +312,7 @@ fn keys(
         (KeyCode::KeyM, IntegratorKind::Midpoint),
         (KeyCode::KeyK, IntegratorKind::Rk4),
         (KeyCode::KeyA, IntegratorKind::Rk45),
+        (KeyCode::KeyI, IntegratorKind::LinearlyImplicitEuler),
     ] {
         if input.just_pressed(key) {
             sim.config.integrator = kind;
@@ -376,7 +378,7 @@ fn hud(sim: Res<ClothSim>, mut contexts: EguiContexts) -> Result {
     let st = sim.sim.stats();
     let n = sim.sim.system.len();
     let text = format!(
-        "{} particles, {} springs  [{}]\n{}  h = {}  t = {:.2} s  steps {}  evaluations {}{}\n{}",
+        "{} particles, {} springs  [{}]\n{}  h = {}  t = {:.2} s  steps {}  evaluations {}  CG iterations {}{}\n{}",
         n,
         sim.sim.system.springs.len(),
         bevy_soft_body::math::PRECISION,
@@ -388,6 +390,7 @@ fn hud(sim: Res<ClothSim>, mut contexts: EguiContexts) -> Result {
         sim.sim.time,
         st.steps,
         st.evaluations,
+        st.linear_iterations,
         if sim.paused && sim.status.is_empty() {
             "  (paused)"
         } else {
@@ -400,7 +403,7 @@ fn hud(sim: Res<ClothSim>, mut contexts: EguiContexts) -> Result {
         .resizable(false)
         .show(contexts.ctx_mut()?, |ui| {
             ui.label(text);
-            ui.small("Space pause · R reset · E S T M K A method · arrows orbit/zoom");
+            ui.small("Space pause · R reset · E S T M K A I method · arrows orbit/zoom");
         });
     Ok(())
 }

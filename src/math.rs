@@ -9,6 +9,8 @@ mod prec {
     /// 12–18 % faster than the 12-byte `Vec3` (docs/BENCHMARKS.md). Bevy's `Vec3` converts with
     /// [`to_f32`](super::to_f32) / [`from_f32`](super::from_f32).
     pub type Vector = glam::Vec3A;
+    /// A 3×3 matrix of [`Scalar`] (blocks of sparse Jacobians).
+    pub type Matrix3 = glam::Mat3A;
     /// Name of the precision, printed on charts and tables.
     pub const PRECISION: &str = "f32";
 }
@@ -19,6 +21,8 @@ mod prec {
     pub type Scalar = f64;
     /// A 3-vector of [`Scalar`].
     pub type Vector = glam::DVec3;
+    /// A 3×3 matrix of [`Scalar`] (blocks of sparse Jacobians).
+    pub type Matrix3 = glam::DMat3;
     /// Name of the precision, printed on charts and tables.
     pub const PRECISION: &str = "f64";
 }

@@ -378,7 +378,7 @@ fn divergence_keeps_the_last_good_state() {
     );
     let msg = err.to_string();
     assert!(
-        msg.contains("forward Euler") && msg.contains("smaller h"),
+        msg.contains("forward Euler") && msg.contains("smaller h") && msg.contains("implicit"),
         "{msg}"
     );
     // Without the energy guard, f32 overflows to non-finite and is caught as such; f64 keeps

@@ -77,10 +77,18 @@ impl fmt::Display for Divergence {
             }
             DivergenceReason::Step(e) => e.to_string(),
         };
+        let advice = match self.integrator {
+            IntegratorKind::ForwardEuler | IntegratorKind::Trapezoid | IntegratorKind::Midpoint => {
+                "a smaller h, more damping, or a more stable method (symplectic Euler, RK4 or linearly implicit Euler)"
+            }
+            IntegratorKind::LinearlyImplicitEuler => {
+                "a smaller h, or check the scene for invalid or extreme parameters"
+            }
+            _ => "a smaller h, more damping, or an implicit method (linearly implicit Euler)",
+        };
         write!(
             f,
-            "{} diverged at frame {}, t = {:.6} s (h = {:.3e} s): {what}; kept the last good state. \
-             Try a smaller h, more damping, or a more stable method (RK4, or an implicit one)",
+            "{} diverged at frame {}, t = {:.6} s (h = {:.3e} s): {what}; kept the last good state. Try {advice}",
             self.integrator.label(),
             self.frame,
             self.time,

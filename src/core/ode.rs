@@ -45,6 +45,12 @@ pub trait OdeState: Clone + Send + Sync + 'static {
     fn kick_drift(&mut self, d: &Self, h: Scalar) {
         self.axpy(h, d);
     }
+
+    /// The state as particle positions and velocities, for methods that need that structure
+    /// (implicit ones); `None` for other states.
+    fn as_particles_mut(&mut self) -> Option<&mut ParticleState> {
+        None
+    }
 }
 
 /// A first-order system `dX/dt = f(X, t)`.
@@ -81,6 +87,11 @@ pub trait OdeSystem<S: OdeState>: Sync {
 
     /// Collision response after a step ending at `t` of size `h` (default: none).
     fn resolve_contacts(&self, _t: Scalar, _h: Scalar, _state: &mut S) {}
+
+    /// Force Jacobians for implicit methods, when the system has them.
+    fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {
+        None
+    }
 }
 
 /// Kinetic and potential energy of a state.
@@ -290,6 +301,9 @@ impl OdeState for ParticleState {
     }
     fn is_second_order(&self) -> bool {
         true
+    }
+    fn as_particles_mut(&mut self) -> Option<&mut ParticleState> {
+        Some(self)
     }
     fn kick_drift(&mut self, d: &Self, h: Scalar) {
         for i in 0..self.x.len() {

@@ -191,6 +191,11 @@ impl ParticleModel {
         self.wind = wind.filter(|w| w.enabled).map(|w| (w, w.field()));
     }
 
+    /// Air-drag coefficient of the wind (0 when off).
+    pub fn wind_coefficient(&self) -> Scalar {
+        self.wind.as_ref().map_or(0.0, |(_, w)| w.coefficient())
+    }
+
     /// The wind, if on.
     pub fn wind(&self) -> Option<&Wind> {
         self.wind.as_ref().map(|(w, _)| w)
@@ -449,6 +454,10 @@ impl OdeSystem<ParticleState> for ParticleModel {
 
     fn time_scale(&self) -> Option<Scalar> {
         self.spring_time_scale()
+    }
+
+    fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {
+        Some(self)
     }
 
     fn resolve_contacts(&self, t: Scalar, _h: Scalar, state: &mut ParticleState) {

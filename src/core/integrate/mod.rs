@@ -4,9 +4,11 @@
 
 mod adaptive;
 mod explicit;
+mod implicit;
 
 pub use adaptive::{AdaptiveConfig, DormandPrince};
 pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
+pub use implicit::LinearlyImplicitEuler;
 
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::math::Scalar;
@@ -33,11 +35,24 @@ pub enum IntegratorKind {
     Rk4,
     /// `a`: adaptive Dormand–Prince 5(4) with error control.
     Rk45,
+    /// `i`: linearly implicit Euler (Baraff & Witkin 1998), one Newton step solved with PCG.
+    LinearlyImplicitEuler,
 }
 
 impl IntegratorKind {
     /// Every kind, in the order charts and tables list them.
-    pub const ALL: [IntegratorKind; 6] = [
+    pub const ALL: [IntegratorKind; 7] = [
+        IntegratorKind::ForwardEuler,
+        IntegratorKind::SymplecticEuler,
+        IntegratorKind::Trapezoid,
+        IntegratorKind::Midpoint,
+        IntegratorKind::Rk4,
+        IntegratorKind::Rk45,
+        IntegratorKind::LinearlyImplicitEuler,
+    ];
+
+    /// The explicit kinds (those that work on any [`OdeSystem`]).
+    pub const EXPLICIT: [IntegratorKind; 6] = [
         IntegratorKind::ForwardEuler,
         IntegratorKind::SymplecticEuler,
         IntegratorKind::Trapezoid,
@@ -55,6 +70,7 @@ impl IntegratorKind {
             Self::Midpoint => 'm',
             Self::Rk4 => 'r',
             Self::Rk45 => 'a',
+            Self::LinearlyImplicitEuler => 'i',
         }
     }
 
@@ -67,6 +83,7 @@ impl IntegratorKind {
             Self::Midpoint => "midpoint",
             Self::Rk4 => "rk4",
             Self::Rk45 => "rk45",
+            Self::LinearlyImplicitEuler => "linearly_implicit_euler",
         }
     }
 
@@ -79,6 +96,7 @@ impl IntegratorKind {
             Self::Midpoint => "midpoint",
             Self::Rk4 => "RK4",
             Self::Rk45 => "RK45 (Dormand-Prince)",
+            Self::LinearlyImplicitEuler => "linearly implicit Euler",
         }
     }
 
@@ -86,7 +104,7 @@ impl IntegratorKind {
     /// solution.
     pub fn order(self) -> u32 {
         match self {
-            Self::ForwardEuler | Self::SymplecticEuler => 1,
+            Self::ForwardEuler | Self::SymplecticEuler | Self::LinearlyImplicitEuler => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 5,
@@ -96,7 +114,7 @@ impl IntegratorKind {
     /// Derivative evaluations per (accepted, fixed) step.
     pub fn stages(self) -> u32 {
         match self {
-            Self::ForwardEuler | Self::SymplecticEuler => 1,
+            Self::ForwardEuler | Self::SymplecticEuler | Self::LinearlyImplicitEuler => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 6,
@@ -106,6 +124,11 @@ impl IntegratorKind {
     /// True when the step size is chosen by error control rather than given.
     pub fn is_adaptive(self) -> bool {
         matches!(self, Self::Rk45)
+    }
+
+    /// True for methods that solve linear systems with the system's Jacobians.
+    pub fn is_implicit(self) -> bool {
+        matches!(self, Self::LinearlyImplicitEuler)
     }
 
     /// Builds the integrator for states of type `S` and systems of type `Sys`.
@@ -120,6 +143,7 @@ impl IntegratorKind {
             Self::Midpoint => Box::new(Midpoint::default()),
             Self::Rk4 => Box::new(Rk4::default()),
             Self::Rk45 => Box::new(DormandPrince::new(adaptive)),
+            Self::LinearlyImplicitEuler => Box::new(LinearlyImplicitEuler::default()),
         }
     }
 }
@@ -162,6 +186,11 @@ impl FromStr for IntegratorKind {
             "m" | "midpoint" => Self::Midpoint,
             "r" | "rk4" | "runge_kutta" => Self::Rk4,
             "a" | "rk45" | "adaptive" | "dopri5" | "dormand_prince" | "ode45" => Self::Rk45,
+            "i"
+            | "implicit"
+            | "linearly_implicit"
+            | "linearly_implicit_euler"
+            | "baraff_witkin" => Self::LinearlyImplicitEuler,
             _ => return Err(UnknownIntegrator(s.to_string())),
         };
         Ok(k)
@@ -180,6 +209,8 @@ pub enum StepError {
     },
     /// The method needs a second-order state (positions and velocities).
     NeedsSecondOrder(IntegratorKind),
+    /// The method needs the system's force Jacobians, which this system does not provide.
+    NeedsJacobians(IntegratorKind),
 }
 
 impl fmt::Display for StepError {
@@ -199,6 +230,9 @@ impl fmt::Display for StepError {
                     k.label()
                 )
             }
+            Self::NeedsJacobians(k) => {
+                write!(f, "{} needs a system with force Jacobians", k.label())
+            }
         }
     }
 }
@@ -214,6 +248,8 @@ pub struct IntegratorStats {
     pub rejected: u64,
     /// Derivative (force) evaluations.
     pub evaluations: u64,
+    /// Linear-solver iterations (implicit methods).
+    pub linear_iterations: u64,
 }
 
 /// A time integrator for states `S` of systems `Sys`.

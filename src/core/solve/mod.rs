@@ -1,0 +1,228 @@
+//! Linear algebra for implicit steps: a symmetric block-sparse matrix with the sparsity of a
+//! spring network, and preconditioned conjugate gradients with Baraff–Witkin's constraint
+//! filter.
+
+use crate::core::forces::Springs;
+use crate::math::{Matrix3, Scalar, Vector};
+
+/// A symmetric matrix of 3×3 blocks: one diagonal block per particle and one off-diagonal block
+/// per spring, used at both `(i, j)` and `(j, i)` (each block is itself symmetric, so the
+/// matrix is). The structure is the spring list, built once per topology; the values are
+/// refilled every step.
+#[derive(Clone, Debug, Default)]
+pub struct SpringMatrix {
+    /// Diagonal blocks.
+    pub diag: Vec<Matrix3>,
+    /// Off-diagonal block of each spring.
+    pub off: Vec<Matrix3>,
+    pairs: Vec<(u32, u32)>,
+}
+
+impl SpringMatrix {
+    /// A zero matrix for `n` particles with the structure of `springs`.
+    pub fn new(n: usize, springs: &Springs) -> Self {
+        Self {
+            diag: vec![Matrix3::ZERO; n],
+            off: vec![Matrix3::ZERO; springs.len()],
+            pairs: springs.as_slice().iter().map(|s| (s.i, s.j)).collect(),
+        }
+    }
+
+    /// True when this matrix has the structure of `springs` over `n` particles.
+    pub fn matches(&self, n: usize, springs: &Springs) -> bool {
+        self.diag.len() == n
+            && self.pairs.len() == springs.len()
+            && self
+                .pairs
+                .iter()
+                .zip(springs.as_slice())
+                .all(|(p, s)| p.0 == s.i && p.1 == s.j)
+    }
+
+    /// Number of block rows.
+    pub fn len(&self) -> usize {
+        self.diag.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.diag.is_empty()
+    }
+
+    /// The spring (block) index pairs.
+    pub fn pairs(&self) -> &[(u32, u32)] {
+        &self.pairs
+    }
+
+    /// `y ← A x`.
+    pub fn mul(&self, x: &[Vector], y: &mut [Vector]) {
+        for ((yi, d), xi) in y.iter_mut().zip(&self.diag).zip(x) {
+            *yi = *d * *xi;
+        }
+        for (o, &(i, j)) in self.off.iter().zip(&self.pairs) {
+            let (i, j) = (i as usize, j as usize);
+            y[i] += *o * x[j];
+            y[j] += *o * x[i];
+        }
+    }
+
+    /// The dense matrix (row-major, `3n × 3n`), for tests and small systems.
+    pub fn to_dense(&self) -> Vec<Vec<f64>> {
+        let n = 3 * self.len();
+        let mut a = vec![vec![0.0; n]; n];
+        let mut put = |bi: usize, bj: usize, m: &Matrix3| {
+            for r in 0..3 {
+                for c in 0..3 {
+                    a[3 * bi + r][3 * bj + c] += m.col(c)[r] as f64;
+                }
+            }
+        };
+        for (i, d) in self.diag.iter().enumerate() {
+            put(i, i, d);
+        }
+        for (o, &(i, j)) in self.off.iter().zip(&self.pairs) {
+            put(i as usize, j as usize, o);
+            put(j as usize, i as usize, o);
+        }
+        a
+    }
+}
+
+/// What a conjugate-gradient solve did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PcgReport {
+    /// Iterations taken.
+    pub iterations: u32,
+    /// Final filtered residual norm relative to the filtered right-hand side.
+    pub relative_residual: Scalar,
+    /// True when the tolerance was met.
+    pub converged: bool,
+}
+
+/// Preconditioned conjugate gradients (block-Jacobi preconditioner) for symmetric positive
+/// definite [`SpringMatrix`] systems, with Baraff & Witkin's filter: degrees of freedom whose
+/// mask is zero (pins, prescribed motion) keep their initial value and are projected out of
+/// every residual and search direction, so the iteration stays in the SPD subspace of free
+/// particles. Owns its scratch vectors.
+#[derive(Clone, Debug)]
+pub struct Pcg {
+    /// Stop when `‖r‖ ≤ tolerance · ‖b‖` (filtered norms).
+    pub tolerance: Scalar,
+    /// Iteration cap.
+    pub max_iterations: u32,
+    r: Vec<Vector>,
+    z: Vec<Vector>,
+    p: Vec<Vector>,
+    q: Vec<Vector>,
+    inv_diag: Vec<Matrix3>,
+}
+
+impl Default for Pcg {
+    fn default() -> Self {
+        Self::new(1e-6, 500)
+    }
+}
+
+fn dot(a: &[Vector], b: &[Vector]) -> Scalar {
+    a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
+}
+
+impl Pcg {
+    /// A solver with relative tolerance `tolerance` and at most `max_iterations` iterations.
+    pub fn new(tolerance: Scalar, max_iterations: u32) -> Self {
+        Self {
+            tolerance,
+            max_iterations,
+            r: vec![],
+            z: vec![],
+            p: vec![],
+            q: vec![],
+            inv_diag: vec![],
+        }
+    }
+
+    /// Solves `A x = b` on the free degrees of freedom (`mask[i] = 1`) starting from `x`;
+    /// entries with `mask[i] = 0` keep their value in `x`.
+    #[allow(clippy::needless_range_loop)] // one index over five parallel arrays
+    pub fn solve(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+    ) -> PcgReport {
+        let n = a.len();
+        for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.q] {
+            v.resize(n, Vector::ZERO);
+        }
+        self.inv_diag.resize(n, Matrix3::IDENTITY);
+        for (inv, d) in self.inv_diag.iter_mut().zip(&a.diag) {
+            let det = d.determinant();
+            *inv = if det.is_normal() {
+                d.inverse()
+            } else {
+                Matrix3::IDENTITY
+            };
+        }
+        // r = S (b − A x)
+        a.mul(x, &mut self.q);
+        for i in 0..n {
+            self.r[i] = (b[i] - self.q[i]) * mask[i];
+        }
+        let bnorm = b
+            .iter()
+            .zip(mask)
+            .map(|(v, m)| (*v * *m).length_squared())
+            .sum::<Scalar>()
+            .sqrt();
+        if bnorm == 0.0 {
+            for (xi, m) in x.iter_mut().zip(mask) {
+                if *m != 0.0 {
+                    *xi = Vector::ZERO;
+                }
+            }
+            return PcgReport {
+                iterations: 0,
+                relative_residual: 0.0,
+                converged: true,
+            };
+        }
+        for i in 0..n {
+            self.z[i] = self.inv_diag[i] * self.r[i];
+            self.p[i] = self.z[i] * mask[i];
+        }
+        let mut rz = dot(&self.r, &self.z);
+        let mut it = 0;
+        let mut rel = dot(&self.r, &self.r).sqrt() / bnorm;
+        while rel > self.tolerance && it < self.max_iterations {
+            a.mul(&self.p, &mut self.q);
+            for (qi, m) in self.q.iter_mut().zip(mask) {
+                *qi *= *m;
+            }
+            let pq = dot(&self.p, &self.q);
+            if pq.is_nan() || pq <= 0.0 {
+                // Not positive definite along p (or breakdown): stop with what we have.
+                break;
+            }
+            let alpha = rz / pq;
+            for i in 0..n {
+                x[i] += self.p[i] * alpha;
+                self.r[i] -= self.q[i] * alpha;
+                self.z[i] = self.inv_diag[i] * self.r[i];
+            }
+            let rz_new = dot(&self.r, &self.z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            for i in 0..n {
+                self.p[i] = (self.z[i] + self.p[i] * beta) * mask[i];
+            }
+            it += 1;
+            rel = dot(&self.r, &self.r).sqrt() / bnorm;
+        }
+        PcgReport {
+            iterations: it,
+            relative_residual: rel,
+            converged: rel <= self.tolerance,
+        }
+    }
+}
