@@ -313,6 +313,7 @@ fn keys(
         (KeyCode::KeyK, IntegratorKind::Rk4),
         (KeyCode::KeyA, IntegratorKind::Rk45),
         (KeyCode::KeyI, IntegratorKind::LinearlyImplicitEuler),
+        (KeyCode::KeyD, IntegratorKind::ImplicitDampingTrapezoid),
     ] {
         if input.just_pressed(key) {
             sim.config.integrator = kind;

@@ -81,6 +81,9 @@ impl fmt::Display for Divergence {
             IntegratorKind::ForwardEuler | IntegratorKind::Trapezoid | IntegratorKind::Midpoint => {
                 "a smaller h, more damping, or a more stable method (symplectic Euler, RK4 or linearly implicit Euler)"
             }
+            IntegratorKind::ImplicitDampingTrapezoid => {
+                "a smaller h (below the elastic limit 2b/k of the stiffest spring) or linearly implicit Euler"
+            }
             IntegratorKind::LinearlyImplicitEuler => {
                 "a smaller h, or check the scene for invalid or extreme parameters"
             }

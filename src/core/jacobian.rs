@@ -104,6 +104,11 @@ pub trait Linearization: Sync {
     fn free_mask(&self, mask: &mut [Scalar]);
     /// Total force on each particle (gravity as `m g` included) at `(t, state)`.
     fn total_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]);
+    /// Forces except the ones linear in velocity (dampers, drag, wind's drag): springs'
+    /// elastic part, gravity, external forces and the wind's push `c w(t)`.
+    fn elastic_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]);
+    /// Fills `a = M − h G` with `G` the (constant in v) damping Jacobian: dampers, drag, wind.
+    fn assemble_damping(&self, state: &ParticleState, h: Scalar, a: &mut SpringMatrix);
     /// Fills `a = M − h D − h² K` (K without the damper's non-symmetric position term; with
     /// `definite`, compressed springs' indefinite part dropped) and `kv = K v`.
     fn assemble(
@@ -150,6 +155,49 @@ impl Linearization for ParticleModel {
             if *w > 0.0 {
                 *fi += self.gravity * *m;
             }
+        }
+    }
+
+    fn elastic_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]) {
+        f.fill(Vector::ZERO);
+        if !self.springs.is_empty() {
+            self.springs.accumulate_elastic(&state.x, f);
+        }
+        let wc = self.wind_coefficient();
+        let push = if wc > 0.0 {
+            self.wind_velocity(t) * wc
+        } else {
+            Vector::ZERO
+        };
+        let ext = self.external_forces();
+        for (i, fi) in f.iter_mut().enumerate() {
+            if self.inv_mass()[i] > 0.0 {
+                *fi += self.gravity * self.mass()[i] + push;
+            }
+            if let Some(e) = ext {
+                *fi += e[i];
+            }
+        }
+    }
+
+    fn assemble_damping(&self, state: &ParticleState, h: Scalar, a: &mut SpringMatrix) {
+        let c = self.linear_drag();
+        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
+            *d = Matrix3::IDENTITY * (*m + h * c);
+        }
+        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
+            let (i, j) = (s.i as usize, s.j as usize);
+            let d = state.x[i] - state.x[j];
+            let l = d.length();
+            let blk = if l > 0.0 && s.damping != 0.0 {
+                let n = d / l;
+                outer(n, n) * (h * s.damping)
+            } else {
+                Matrix3::ZERO
+            };
+            a.diag[i] += blk;
+            a.diag[j] += blk;
+            *o = -blk;
         }
     }
 

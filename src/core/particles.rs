@@ -196,6 +196,13 @@ impl ParticleModel {
         self.wind.as_ref().map_or(0.0, |(_, w)| w.coefficient())
     }
 
+    /// Air velocity of the wind at time `t` (zero when off).
+    pub fn wind_velocity(&self, t: Scalar) -> Vector {
+        self.wind
+            .as_ref()
+            .map_or(Vector::ZERO, |(_, w)| w.velocity(t))
+    }
+
     /// The wind, if on.
     pub fn wind(&self) -> Option<&Wind> {
         self.wind.as_ref().map(|(w, _)| w)

@@ -187,6 +187,35 @@ impl Springs {
         }
     }
 
+    /// Adds only the elastic part of the spring forces (dampers left out), for methods that
+    /// treat damping implicitly.
+    pub fn accumulate_elastic(&self, x: &[Vector], f: &mut [Vector]) {
+        let n = x.len();
+        assert!(f.len() == n, "state and force arrays differ in length");
+        let bound = if self.bound == usize::MAX {
+            self.max_index()
+        } else {
+            self.bound
+        };
+        assert!(
+            bound <= n,
+            "a spring refers to particle {} of {n}",
+            bound.saturating_sub(1)
+        );
+        for s in &self.springs {
+            let (i, j) = (s.i as usize, s.j as usize);
+            let d = x[i] - x[j];
+            let l = d.length();
+            let c = if l > 0.0 {
+                s.k * (s.rest / l - 1.0)
+            } else {
+                0.0
+            };
+            f[i] += d * c;
+            f[j] -= d * c;
+        }
+    }
+
     /// Elastic energy `Σ ½ k (l − L)²`.
     pub fn energy(&self, x: &[Vector]) -> Scalar {
         self.springs

@@ -8,7 +8,7 @@ mod implicit;
 
 pub use adaptive::{AdaptiveConfig, DormandPrince};
 pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
-pub use implicit::LinearlyImplicitEuler;
+pub use implicit::{ImplicitDampingTrapezoid, LinearlyImplicitEuler};
 
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::math::Scalar;
@@ -37,11 +37,13 @@ pub enum IntegratorKind {
     Rk45,
     /// `i`: linearly implicit Euler (Baraff & Witkin 1998), one Newton step solved with PCG.
     LinearlyImplicitEuler,
+    /// `d`: the PhysBAM slides' trapezoid with implicit damping, solved with PCG.
+    ImplicitDampingTrapezoid,
 }
 
 impl IntegratorKind {
     /// Every kind, in the order charts and tables list them.
-    pub const ALL: [IntegratorKind; 7] = [
+    pub const ALL: [IntegratorKind; 8] = [
         IntegratorKind::ForwardEuler,
         IntegratorKind::SymplecticEuler,
         IntegratorKind::Trapezoid,
@@ -49,6 +51,7 @@ impl IntegratorKind {
         IntegratorKind::Rk4,
         IntegratorKind::Rk45,
         IntegratorKind::LinearlyImplicitEuler,
+        IntegratorKind::ImplicitDampingTrapezoid,
     ];
 
     /// The explicit kinds (those that work on any [`OdeSystem`]).
@@ -71,6 +74,7 @@ impl IntegratorKind {
             Self::Rk4 => 'r',
             Self::Rk45 => 'a',
             Self::LinearlyImplicitEuler => 'i',
+            Self::ImplicitDampingTrapezoid => 'd',
         }
     }
 
@@ -84,6 +88,7 @@ impl IntegratorKind {
             Self::Rk4 => "rk4",
             Self::Rk45 => "rk45",
             Self::LinearlyImplicitEuler => "linearly_implicit_euler",
+            Self::ImplicitDampingTrapezoid => "implicit_damping_trapezoid",
         }
     }
 
@@ -97,6 +102,7 @@ impl IntegratorKind {
             Self::Rk4 => "RK4",
             Self::Rk45 => "RK45 (Dormand-Prince)",
             Self::LinearlyImplicitEuler => "linearly implicit Euler",
+            Self::ImplicitDampingTrapezoid => "trapezoid with implicit damping",
         }
     }
 
@@ -104,7 +110,10 @@ impl IntegratorKind {
     /// solution.
     pub fn order(self) -> u32 {
         match self {
-            Self::ForwardEuler | Self::SymplecticEuler | Self::LinearlyImplicitEuler => 1,
+            Self::ForwardEuler
+            | Self::SymplecticEuler
+            | Self::LinearlyImplicitEuler
+            | Self::ImplicitDampingTrapezoid => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 5,
@@ -114,7 +123,10 @@ impl IntegratorKind {
     /// Derivative evaluations per (accepted, fixed) step.
     pub fn stages(self) -> u32 {
         match self {
-            Self::ForwardEuler | Self::SymplecticEuler | Self::LinearlyImplicitEuler => 1,
+            Self::ForwardEuler
+            | Self::SymplecticEuler
+            | Self::LinearlyImplicitEuler
+            | Self::ImplicitDampingTrapezoid => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 6,
@@ -128,7 +140,10 @@ impl IntegratorKind {
 
     /// True for methods that solve linear systems with the system's Jacobians.
     pub fn is_implicit(self) -> bool {
-        matches!(self, Self::LinearlyImplicitEuler)
+        matches!(
+            self,
+            Self::LinearlyImplicitEuler | Self::ImplicitDampingTrapezoid
+        )
     }
 
     /// Builds the integrator for states of type `S` and systems of type `Sys`.
@@ -144,6 +159,7 @@ impl IntegratorKind {
             Self::Rk4 => Box::new(Rk4::default()),
             Self::Rk45 => Box::new(DormandPrince::new(adaptive)),
             Self::LinearlyImplicitEuler => Box::new(LinearlyImplicitEuler::default()),
+            Self::ImplicitDampingTrapezoid => Box::new(ImplicitDampingTrapezoid::default()),
         }
     }
 }
@@ -191,6 +207,9 @@ impl FromStr for IntegratorKind {
             | "linearly_implicit"
             | "linearly_implicit_euler"
             | "baraff_witkin" => Self::LinearlyImplicitEuler,
+            "d" | "implicit_damping" | "implicit_damping_trapezoid" | "physbam" => {
+                Self::ImplicitDampingTrapezoid
+            }
             _ => return Err(UnknownIntegrator(s.to_string())),
         };
         Ok(k)
