@@ -160,7 +160,7 @@ fn config(a: &Args) -> DriverConfig {
             atol: a.atol,
             ..Default::default()
         },
-        energy_guard: if a.guard { Some(1e6) } else { None },
+        energy_guard: if a.guard { Some(100.0) } else { None },
     }
 }
 

@@ -4,6 +4,7 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+use bevy_soft_body::core::ode::OdeSystem;
 use bevy_soft_body::core::scene::SpringKind;
 use bevy_soft_body::prelude::*;
 
@@ -368,7 +369,23 @@ fn divergence_keeps_the_last_good_state() {
         ..Default::default()
     };
     let mut sim = Simulation::new(model, state, cfg);
-    let err = sim.run_until(10.0).unwrap_err();
+    // The last good state is the last one delivered: the end of the last completed frame.
+    let mut last = (sim.state.clone(), sim.time);
+    let err = loop {
+        match sim.advance_frame() {
+            Ok(_) => last = (sim.state.clone(), sim.time),
+            Err(e) => break e,
+        }
+    };
+    assert_eq!(sim.state, last.0, "restored to the last delivered state");
+    assert_eq!(sim.time, last.1);
+    // Every delivered state passed the guard: its internal energy is within the bound
+    // (100 × the energy scale by default; how far past physical that is depends on how fast
+    // the method blows up within one frame — here ×7 per substep).
+    let DivergenceReason::EnergyBlowup { bound, .. } = err.reason else {
+        panic!("{err}")
+    };
+    assert!((sim.system.guard_energy(&sim.state) as f64) <= bound);
     assert!(
         sim.state
             .x
@@ -394,4 +411,26 @@ fn divergence_keeps_the_last_good_state() {
         assert_eq!(err.reason, DivergenceReason::NonFinite);
         assert!(sim.state.x.iter().all(|v| v.is_finite()));
     }
+}
+
+#[test]
+fn free_fall_is_not_divergence() {
+    // An unpinned cloth falling for 10 s (≈ 490 m, kinetic energy ≈ 10⁴ × its initial energy
+    // scale) is physical: the guard watches internal energy (elastic plus kinetic relative to
+    // the centre of mass), which free fall leaves unchanged.
+    let p = build::ClothParams {
+        pins: build::ClothPins::None,
+        ..Default::default()
+    };
+    let (model, state) = build::cloth(&p).unwrap().build().unwrap();
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::Rk4,
+        policy: StepPolicy::Fixed { h: 0.005 },
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(model, state, cfg);
+    sim.run_until(10.0).unwrap_or_else(|e| panic!("{e}"));
+    // Drag 0.01 N·s/m on 10 g particles: terminal speed m g / c = 9.81 m/s… reached.
+    let vy = sim.state.v[0].y as f64;
+    assert!(vy < -9.0, "falling at {vy} m/s");
 }

@@ -41,10 +41,11 @@ impl Default for StepPolicy {
 pub enum DivergenceReason {
     /// A position or velocity became NaN or infinite.
     NonFinite,
-    /// Kinetic energy exceeded the guard's bound.
+    /// Internal energy (elastic plus kinetic relative to the centre of mass) exceeded the
+    /// guard's bound.
     EnergyBlowup {
-        /// Kinetic energy reached.
-        kinetic: f64,
+        /// Energy reached.
+        energy: f64,
         /// The bound.
         bound: f64,
     },
@@ -52,8 +53,8 @@ pub enum DivergenceReason {
     Step(StepError),
 }
 
-/// A detected divergence. The state was restored to the last good one (before the failing
-/// step).
+/// A detected divergence. The state and time were restored to the start of the failing frame:
+/// the last state the driver delivered (and a renderer showed), which passed every check.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Divergence {
     /// Frame being computed.
@@ -72,8 +73,8 @@ impl fmt::Display for Divergence {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let what = match &self.reason {
             DivergenceReason::NonFinite => "the state became non-finite".to_string(),
-            DivergenceReason::EnergyBlowup { kinetic, bound } => {
-                format!("kinetic energy {kinetic:.3e} J exceeded the bound {bound:.3e} J")
+            DivergenceReason::EnergyBlowup { energy, bound } => {
+                format!("internal energy {energy:.3e} J exceeded the bound {bound:.3e} J")
             }
             DivergenceReason::Step(e) => e.to_string(),
         };
@@ -125,8 +126,10 @@ pub struct DriverConfig {
     pub frame_dt: f64,
     /// Tolerances of adaptive methods.
     pub adaptive: AdaptiveConfig,
-    /// Stop when kinetic energy exceeds this multiple of the system's energy scale
-    /// (`None`: only non-finite states stop a run).
+    /// Stop when the system's guard energy (for particles: elastic plus kinetic relative to
+    /// the centre of mass) exceeds this multiple of its energy scale (`None`: only non-finite
+    /// states stop a run). A physical motion stays within a few times the scale; 100 catches
+    /// an explicit method's blow-up within a step or two.
     pub energy_guard: Option<f64>,
 }
 
@@ -137,7 +140,7 @@ impl Default for DriverConfig {
             policy: StepPolicy::default(),
             frame_dt: 1.0 / 60.0,
             adaptive: AdaptiveConfig::default(),
-            energy_guard: Some(1e6),
+            energy_guard: Some(100.0),
         }
     }
 }
@@ -216,6 +219,10 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// Advances one frame in substeps that land exactly on its end.
     pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
         let t_end = self.frame_end(self.frame + 1);
+        // The last good state is the one delivered at the end of the previous frame: substeps
+        // of a diverging frame may already be far from it while still finite.
+        let t_start = self.time;
+        self.backup.copy_from(&self.state);
         let h_pol = self.step_size();
         let mut rep = FrameReport {
             substeps: 0,
@@ -233,7 +240,6 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             };
             let t = self.time;
             self.system.apply_constraints(t, &mut self.state);
-            self.backup.copy_from(&self.state);
             let fail = |reason, h| Divergence {
                 frame: self.frame,
                 time: t as f64,
@@ -245,6 +251,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                 Ok(taken) => taken,
                 Err(e) => {
                     self.state.copy_from(&self.backup);
+                    self.time = t_start;
                     return Err(fail(DivergenceReason::Step(e), h));
                 }
             };
@@ -253,15 +260,17 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             self.system.resolve_contacts(t_new, taken, &mut self.state);
             if !self.state.is_finite() {
                 self.state.copy_from(&self.backup);
+                self.time = t_start;
                 return Err(fail(DivergenceReason::NonFinite, taken));
             }
             if let Some(bound) = self.energy_bound {
-                let k = self.system.kinetic_energy(&self.state);
+                let k = self.system.guard_energy(&self.state);
                 if k.is_nan() || k > bound {
                     self.state.copy_from(&self.backup);
+                    self.time = t_start;
                     return Err(fail(
                         DivergenceReason::EnergyBlowup {
-                            kinetic: k as f64,
+                            energy: k as f64,
                             bound: bound as f64,
                         },
                         taken,

@@ -74,8 +74,15 @@ pub trait OdeSystem<S: OdeState>: Sync {
         self.energy(0.0, state).map_or(0.0, |e| e.kinetic)
     }
 
+    /// The energy the divergence guard watches (default: kinetic energy). It should stay
+    /// bounded for any physical motion, free fall included.
+    fn guard_energy(&self, state: &S) -> Scalar {
+        self.kinetic_energy(state)
+    }
+
     /// A characteristic energy of the system in this state: the driver's divergence guard
-    /// trips when kinetic energy exceeds a large multiple of it. `None` turns the guard off.
+    /// trips when [`OdeSystem::guard_energy`] exceeds a multiple of it. `None` turns the guard
+    /// off.
     fn energy_scale(&self, _state: &S) -> Option<Scalar> {
         None
     }

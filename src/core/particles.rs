@@ -420,6 +420,28 @@ impl OdeSystem<ParticleState> for ParticleModel {
             .sum()
     }
 
+    /// Internal energy: elastic energy plus kinetic energy relative to the centre of mass.
+    /// A falling or thrown body keeps it constant (or loses it to damping); an integrator that
+    /// diverges inflates it at once.
+    fn guard_energy(&self, state: &ParticleState) -> Scalar {
+        let mut m_tot = 0.0;
+        let mut p = Vector::ZERO;
+        let mut k = 0.0;
+        for (m, v) in self.mass.iter().zip(&state.v) {
+            if *m > 0.0 {
+                m_tot += *m;
+                p += *v * *m;
+                k += 0.5 * *m * v.length_squared();
+            }
+        }
+        let k_cm = if m_tot > 0.0 {
+            0.5 * p.length_squared() / m_tot
+        } else {
+            0.0
+        };
+        (k - k_cm).max(0.0) + self.springs.energy(&state.x)
+    }
+
     /// Kinetic plus elastic energy now, plus the work gravity and external forces could do
     /// over the body's extent plus one metre: a body that stays physical never gets kinetic
     /// energy many times this.
