@@ -171,7 +171,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         lin.free_mask(&mut self.mask);
         for i in 0..n {
             self.rhs[i] = (self.f0[i] + self.kv[i] * h) * (h * self.mask[i]);
-            self.dv[i] = Vector::ZERO;
+            // Warm start from the previous step's Δv (zero on the first step and for
+            // constrained particles): consecutive steps change velocity similarly.
+            self.dv[i] *= self.mask[i];
         }
         self.last = self.pcg.solve(a, &self.rhs, &mut self.dv, &self.mask);
         for i in 0..n {
