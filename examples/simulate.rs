@@ -13,7 +13,7 @@
 //! last good frame is kept on disk, and the exit status is 2.
 //!
 //! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly`,
-//! `--scene-file FILE`, `--integrator e|s|t|m|r|a` (or a name), `--h STEP`, `--cfl NUMBER`,
+//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d` (or a name), `--h STEP`, `--cfl NUMBER`,
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
 //! `--no-guard`, `--obj`, `--out DIR`, `--quiet`.
 
