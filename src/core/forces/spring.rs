@@ -131,6 +131,21 @@ impl Springs {
         self.damped > 0
     }
 
+    /// Panics unless every spring index is below `n` (done once per call, so the kernels can
+    /// index without checks).
+    fn check_bound(&self, n: usize) {
+        let bound = if self.bound == usize::MAX {
+            self.max_index()
+        } else {
+            self.bound
+        };
+        assert!(
+            bound <= n,
+            "a spring refers to particle {} of {n}",
+            bound.saturating_sub(1)
+        );
+    }
+
     /// Adds spring (and damper) forces into `f`. `x`, `v` and `f` have one entry per particle.
     ///
     /// # Panics
@@ -142,47 +157,26 @@ impl Springs {
             v.len() == n && f.len() == n,
             "state and force arrays differ in length"
         );
-        let bound = if self.bound == usize::MAX {
-            self.max_index()
-        } else {
-            self.bound
-        };
-        assert!(
-            bound <= n,
-            "a spring refers to particle {} of {n}",
-            bound.saturating_sub(1)
-        );
+        self.check_bound(n);
+        if self.damped == 0 {
+            // SAFETY: lengths and index bound checked just above.
+            unsafe { self.elastic_unchecked(x, f) };
+            return;
+        }
         let (xp, vp, fp) = (x.as_ptr(), v.as_ptr(), f.as_mut_ptr());
-        // SAFETY: every index is below `bound <= n`, the length of all three slices (checked
-        // above), and `f` is exclusively borrowed for the whole loop.
+        // SAFETY: every index is below the bound, which is ≤ n, the length of all three slices
+        // (checked above), and `f` is exclusively borrowed for the whole loop.
         unsafe {
-            if self.damped > 0 {
-                for s in &self.springs {
-                    let (i, j) = (s.i as usize, s.j as usize);
-                    let d = *xp.add(i) - *xp.add(j);
-                    let l = d.length();
-                    // Zero-length springs have no direction and exert nothing.
-                    let nrm = d * if l > 0.0 { 1.0 / l } else { 0.0 };
-                    let mag = -s.k * (l - s.rest) - s.damping * nrm.dot(*vp.add(i) - *vp.add(j));
-                    let fi = nrm * mag;
-                    *fp.add(i) += fi;
-                    *fp.add(j) -= fi;
-                }
-            } else {
-                for s in &self.springs {
-                    let (i, j) = (s.i as usize, s.j as usize);
-                    let d = *xp.add(i) - *xp.add(j);
-                    let l = d.length();
-                    // −k (l − L) d/l = d·k (L/l − 1).
-                    let c = if l > 0.0 {
-                        s.k * (s.rest / l - 1.0)
-                    } else {
-                        0.0
-                    };
-                    let fi = d * c;
-                    *fp.add(i) += fi;
-                    *fp.add(j) -= fi;
-                }
+            for s in &self.springs {
+                let (i, j) = (s.i as usize, s.j as usize);
+                let d = *xp.add(i) - *xp.add(j);
+                let l = d.length();
+                // Zero-length springs have no direction and exert nothing.
+                let nrm = d * if l > 0.0 { 1.0 / l } else { 0.0 };
+                let mag = -s.k * (l - s.rest) - s.damping * nrm.dot(*vp.add(i) - *vp.add(j));
+                let fi = nrm * mag;
+                *fp.add(i) += fi;
+                *fp.add(j) -= fi;
             }
         }
     }
@@ -190,29 +184,37 @@ impl Springs {
     /// Adds only the elastic part of the spring forces (dampers left out), for methods that
     /// treat damping implicitly.
     pub fn accumulate_elastic(&self, x: &[Vector], f: &mut [Vector]) {
-        let n = x.len();
-        assert!(f.len() == n, "state and force arrays differ in length");
-        let bound = if self.bound == usize::MAX {
-            self.max_index()
-        } else {
-            self.bound
-        };
         assert!(
-            bound <= n,
-            "a spring refers to particle {} of {n}",
-            bound.saturating_sub(1)
+            f.len() == x.len(),
+            "state and force arrays differ in length"
         );
+        self.check_bound(x.len());
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { self.elastic_unchecked(x, f) }
+    }
+
+    /// The undamped kernel: `f_i += d·k (L/l − 1)`, `f_j −= …`.
+    ///
+    /// # Safety
+    /// `f.len() == x.len()` and [`Springs::check_bound`] passed for that length.
+    unsafe fn elastic_unchecked(&self, x: &[Vector], f: &mut [Vector]) {
+        let (xp, fp) = (x.as_ptr(), f.as_mut_ptr());
         for s in &self.springs {
             let (i, j) = (s.i as usize, s.j as usize);
-            let d = x[i] - x[j];
-            let l = d.length();
-            let c = if l > 0.0 {
-                s.k * (s.rest / l - 1.0)
-            } else {
-                0.0
-            };
-            f[i] += d * c;
-            f[j] -= d * c;
+            // SAFETY: the caller guarantees i, j < x.len() == f.len().
+            unsafe {
+                let d = *xp.add(i) - *xp.add(j);
+                let l = d.length();
+                // −k (l − L) d/l = d·k (L/l − 1); zero-length springs exert nothing.
+                let c = if l > 0.0 {
+                    s.k * (s.rest / l - 1.0)
+                } else {
+                    0.0
+                };
+                let fi = d * c;
+                *fp.add(i) += fi;
+                *fp.add(j) -= fi;
+            }
         }
     }
 

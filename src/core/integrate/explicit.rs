@@ -25,12 +25,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ForwardEule
         self.stats.evaluations += 1;
         Ok(h)
     }
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 /// Symplectic (semi-implicit) Euler for second-order systems: `v ← v + h a(x, v)`, then
@@ -57,12 +52,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for SymplecticE
         self.stats.evaluations += 1;
         Ok(h)
     }
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 /// Explicit trapezoid (Heun): `f0 = f(X, t)`, `f1 = f(X + h f0, t + h)`,
@@ -93,12 +83,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for Trapezoid<S
         self.stats.evaluations += 2;
         Ok(h)
     }
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 /// Explicit midpoint: `X ← X + h f(X + h/2 f(X, t), t + h/2)`. Order 2.
@@ -125,12 +110,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for Midpoint<S>
         self.stats.evaluations += 2;
         Ok(h)
     }
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 /// Classic fourth-order Runge–Kutta. Stable on the imaginary axis up to `|h ω| ≤ 2√2`.
@@ -173,12 +153,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for Rk4<S> {
         self.stats.evaluations += 4;
         Ok(h)
     }
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 macro_rules! scratch_default {

@@ -128,13 +128,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
         Ok(h)
     }
 
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }
 
 impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImplicitEuler {
@@ -186,11 +180,5 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         Ok(h)
     }
 
-    fn stats(&self) -> IntegratorStats {
-        self.stats
-    }
-
-    fn reset(&mut self) {
-        self.stats = IntegratorStats::default();
-    }
+    counters!();
 }

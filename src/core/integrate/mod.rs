@@ -2,6 +2,18 @@
 //! ([`OdeSystem`]), owns its scratch states (created on the first step, reused afterwards: a
 //! step allocates nothing), and is selected at run time by an [`IntegratorKind`].
 
+/// The `stats` / `reset` pair of an integrator whose only memory is its counters.
+macro_rules! counters {
+    () => {
+        fn stats(&self) -> IntegratorStats {
+            self.stats
+        }
+        fn reset(&mut self) {
+            self.stats = IntegratorStats::default();
+        }
+    };
+}
+
 mod adaptive;
 mod explicit;
 mod implicit;
