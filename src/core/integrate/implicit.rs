@@ -1,9 +1,39 @@
 //! Implicit methods for stiff particle systems.
 
 use super::{Integrator, IntegratorKind, IntegratorStats, StepError, check_h};
-use crate::core::ode::{OdeState, OdeSystem};
+use crate::core::jacobian::Linearization;
+use crate::core::ode::{OdeState, OdeSystem, ParticleState};
 use crate::core::solve::{Pcg, PcgReport, SpringMatrix};
 use crate::math::{Scalar, Vector};
+
+/// What every implicit step starts with: the step size checked, the system's linearization
+/// and the state's particles found (or the error saying which is missing), and the matrix
+/// rebuilt when the system's structure changed.
+fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
+    kind: IntegratorKind,
+    sys: &'a Sys,
+    h: Scalar,
+    state: &'a mut S,
+    slot: &'a mut Option<SpringMatrix>,
+) -> Result<
+    (
+        &'a dyn Linearization,
+        &'a mut ParticleState,
+        &'a mut SpringMatrix,
+    ),
+    StepError,
+> {
+    check_h(h)?;
+    let lin = sys.linearization().ok_or(StepError::NeedsJacobians(kind))?;
+    let ps = state
+        .as_particles_mut()
+        .ok_or(StepError::NeedsSecondOrder(kind))?;
+    if !slot.as_ref().is_some_and(|a| lin.matrix_matches(a)) {
+        *slot = None;
+    }
+    let a = slot.get_or_insert_with(|| lin.new_matrix());
+    Ok((lin, ps, a))
+}
 
 /// Linearly implicit (semi-implicit backward) Euler of Baraff & Witkin (1998): one Newton step
 /// of backward Euler,
@@ -89,23 +119,18 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
         h: Scalar,
         state: &mut S,
     ) -> Result<Scalar, StepError> {
-        check_h(h)?;
-        let kind = IntegratorKind::ImplicitDampingTrapezoid;
-        let Some(lin) = sys.linearization() else {
-            return Err(StepError::NeedsJacobians(kind));
-        };
-        let Some(ps) = state.as_particles_mut() else {
-            return Err(StepError::NeedsSecondOrder(kind));
-        };
+        let (lin, ps, a) = implicit_setup(
+            IntegratorKind::ImplicitDampingTrapezoid,
+            sys,
+            h,
+            state,
+            &mut self.a,
+        )?;
         let n = lin.particles();
         for v in [&mut self.f, &mut self.rhs, &mut self.v1] {
             v.resize(n, Vector::ZERO);
         }
         self.mask.resize(n, 0.0);
-        let a = match &mut self.a {
-            Some(a) if lin.matrix_matches(a) => a,
-            slot => slot.insert(lin.new_matrix()),
-        };
         lin.elastic_forces(t, ps, &mut self.f);
         lin.assemble_damping(ps, h, a);
         lin.free_mask(&mut self.mask);
@@ -143,23 +168,18 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         h: Scalar,
         state: &mut S,
     ) -> Result<Scalar, StepError> {
-        check_h(h)?;
-        let kind = IntegratorKind::LinearlyImplicitEuler;
-        let Some(lin) = sys.linearization() else {
-            return Err(StepError::NeedsJacobians(kind));
-        };
-        let Some(ps) = state.as_particles_mut() else {
-            return Err(StepError::NeedsSecondOrder(kind));
-        };
+        let (lin, ps, a) = implicit_setup(
+            IntegratorKind::LinearlyImplicitEuler,
+            sys,
+            h,
+            state,
+            &mut self.a,
+        )?;
         let n = lin.particles();
         for v in [&mut self.f0, &mut self.kv, &mut self.rhs, &mut self.dv] {
             v.resize(n, Vector::ZERO);
         }
         self.mask.resize(n, 0.0);
-        let a = match &mut self.a {
-            Some(a) if lin.matrix_matches(a) => a,
-            slot => slot.insert(lin.new_matrix()),
-        };
         lin.total_forces(t, ps, &mut self.f0);
         lin.assemble(ps, h, self.definite, a, &mut self.kv);
         lin.free_mask(&mut self.mask);
