@@ -12,7 +12,6 @@ use std::fmt;
 
 /// How the substep size is chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum StepPolicy {
     /// A fixed step `h` (the largest step for adaptive methods).

@@ -7,7 +7,6 @@ use serde::{Deserialize, Serialize};
 
 /// A trajectory `p(t)`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Motion {
     /// At rest at `position`.

@@ -29,7 +29,6 @@ pub struct ParticleDesc {
 
 /// What a spring is for (builders tag them; the physics does not care).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(rename_all = "snake_case")]
 pub enum SpringKind {
     /// Grid neighbours.

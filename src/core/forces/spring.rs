@@ -15,7 +15,6 @@ use serde::{Deserialize, Serialize};
 
 /// How a spring's stiffness is given.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(rename_all = "snake_case")]
 pub enum SpringLaw {
     /// `f = −k (l − L) n`, `k` in N/m.

@@ -10,7 +10,6 @@ use serde::{Deserialize, Serialize};
 
 /// Wind settings.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(default)]
 pub struct Wind {
     /// Mean air velocity (m/s).

@@ -9,7 +9,6 @@ use serde::{Deserialize, Serialize};
 
 /// Tolerances and controller settings of the adaptive method.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(default)]
 pub struct AdaptiveConfig {
     /// Relative tolerance.

@@ -31,7 +31,6 @@ use std::str::FromStr;
 /// Which time integrator advances a system. Parsed from names (`"rk4"`, `"forward_euler"`)
 /// and from the one-letter codes of the classic sample solution's command line.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
-#[cfg_attr(feature = "plugin", derive(bevy::reflect::Reflect))]
 #[serde(rename_all = "snake_case")]
 pub enum IntegratorKind {
     /// `e`: forward (explicit) Euler, order 1.
