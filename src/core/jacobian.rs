@@ -12,7 +12,7 @@
 
 use crate::core::forces::PackedSpring;
 use crate::core::ode::ParticleState;
-use crate::core::particles::{Dof, ParticleModel};
+use crate::core::particles::ParticleModel;
 use crate::core::solve::SpringMatrix;
 use crate::math::{Matrix3, Scalar, Vector};
 
@@ -139,12 +139,11 @@ impl Linearization for ParticleModel {
     }
 
     fn free_mask(&self, mask: &mut [Scalar]) {
-        for (i, m) in mask.iter_mut().enumerate() {
-            *m = if self.inv_mass()[i] > 0.0 && matches!(self.dof(i), Dof::Free) {
-                1.0
-            } else {
-                0.0
-            };
+        // `pin` and `prescribe` zero a particle's inverse mass and `release` restores it, so a
+        // positive inverse mass is exactly "free with a valid mass" — no scan of the pin list
+        // per particle on every implicit step.
+        for (m, w) in mask.iter_mut().zip(self.inv_mass()) {
+            *m = if *w > 0.0 { 1.0 } else { 0.0 };
         }
     }
 
