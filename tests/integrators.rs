@@ -295,3 +295,29 @@ fn rk45_reuses_its_last_stage_fsal() {
     let expected = 6 * (st.steps + st.rejected) + 2; // + first k1 + the initial-step probe
     assert_eq!(st.evaluations, expected, "{st:?}");
 }
+
+#[test]
+fn every_kind_parses_from_its_letter_and_name() {
+    for kind in IntegratorKind::ALL {
+        assert_eq!(
+            kind.letter().to_string().parse::<IntegratorKind>(),
+            Ok(kind)
+        );
+        assert_eq!(kind.name().parse::<IntegratorKind>(), Ok(kind));
+    }
+    let letters: std::collections::HashSet<char> =
+        IntegratorKind::ALL.iter().map(|k| k.letter()).collect();
+    assert_eq!(
+        letters.len(),
+        IntegratorKind::ALL.len(),
+        "letters are unique"
+    );
+    assert!("x".parse::<IntegratorKind>().is_err());
+    // EXPLICIT is ALL without the implicit kinds, in order.
+    let explicit: Vec<IntegratorKind> = IntegratorKind::ALL
+        .into_iter()
+        .filter(|k| !k.is_implicit())
+        .collect();
+    assert_eq!(IntegratorKind::EXPLICIT.to_vec(), explicit);
+    assert_eq!(IntegratorKind::EXPLICIT.len(), 6);
+}

@@ -52,6 +52,19 @@ pub enum IntegratorKind {
     ImplicitDampingTrapezoid,
 }
 
+/// Number of explicit kinds in [`IntegratorKind::ALL`].
+const N_EXPLICIT: usize = {
+    let mut n = 0;
+    let mut i = 0;
+    while i < IntegratorKind::ALL.len() {
+        if !IntegratorKind::ALL[i].is_implicit() {
+            n += 1;
+        }
+        i += 1;
+    }
+    n
+};
+
 impl IntegratorKind {
     /// Every kind, in the order charts and tables list them.
     pub const ALL: [IntegratorKind; 8] = [
@@ -65,15 +78,20 @@ impl IntegratorKind {
         IntegratorKind::ImplicitDampingTrapezoid,
     ];
 
-    /// The explicit kinds (those that work on any [`OdeSystem`]).
-    pub const EXPLICIT: [IntegratorKind; 6] = [
-        IntegratorKind::ForwardEuler,
-        IntegratorKind::SymplecticEuler,
-        IntegratorKind::Trapezoid,
-        IntegratorKind::Midpoint,
-        IntegratorKind::Rk4,
-        IntegratorKind::Rk45,
-    ];
+    /// The explicit kinds (those that work on any [`OdeSystem`]): [`IntegratorKind::ALL`]
+    /// without the implicit ones, in the same order, computed at compile time.
+    pub const EXPLICIT: [IntegratorKind; N_EXPLICIT] = {
+        let mut out = [IntegratorKind::ForwardEuler; N_EXPLICIT];
+        let (mut i, mut k) = (0, 0);
+        while i < Self::ALL.len() {
+            if !Self::ALL[i].is_implicit() {
+                out[k] = Self::ALL[i];
+                k += 1;
+            }
+            i += 1;
+        }
+        out
+    };
 
     /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`).
     pub fn letter(self) -> char {
@@ -150,7 +168,7 @@ impl IntegratorKind {
     }
 
     /// True for methods that solve linear systems with the system's Jacobians.
-    pub fn is_implicit(self) -> bool {
+    pub const fn is_implicit(self) -> bool {
         matches!(
             self,
             Self::LinearlyImplicitEuler | Self::ImplicitDampingTrapezoid
