@@ -217,13 +217,7 @@ fn setup(
     sim: Res<ClothSim>,
 ) {
     let surface = sim.scene.surface.clone().unwrap_or_default();
-    let positions: Vec<[f32; 3]> = sim
-        .sim
-        .state
-        .x
-        .iter()
-        .map(|x| to_f32(*x).to_array())
-        .collect();
+    let positions = mesh_positions(&sim.sim.state);
     let mut mesh = Mesh::new(
         PrimitiveTopology::TriangleList,
         RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
@@ -284,6 +278,11 @@ fn setup(
         Camera3d::default(),
         Transform::from_xyz(0.0, 0.6, 3.2).looking_at(Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
     ));
+}
+
+/// Particle positions as Bevy mesh vertex positions.
+fn mesh_positions(state: &ParticleState) -> Vec<[f32; 3]> {
+    state.x.iter().map(|x| to_f32(*x).to_array()).collect()
 }
 
 fn step(mut sim: ResMut<ClothSim>) {
@@ -348,13 +347,7 @@ fn sync_cloth(sim: Res<ClothSim>, q: Query<&ClothMesh>, mut meshes: ResMut<Asset
             continue;
         };
         // The driver restores the last good state on divergence, so this is always finite.
-        let positions: Vec<[f32; 3]> = sim
-            .sim
-            .state
-            .x
-            .iter()
-            .map(|x| to_f32(*x).to_array())
-            .collect();
+        let positions = mesh_positions(&sim.sim.state);
         mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
         mesh.compute_smooth_normals();
     }

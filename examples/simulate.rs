@@ -257,15 +257,7 @@ fn run(a: &Args) -> Result<(), String> {
                     "{},{},0,{},{},{},{},{},{}",
                     sim.frame, sim.time, x.x, x.y, x.z, d.x, d.y, d.z
                 );
-                let e = sim.system.energy(sim.time, &sim.state).unwrap_or_default();
-                let _ = writeln!(
-                    ec,
-                    "{},{},{},{}",
-                    sim.time,
-                    e.kinetic,
-                    e.potential,
-                    e.total()
-                );
+                energy_row(ec, sim.time, sim.system.energy(sim.time, &sim.state));
             };
             rows(&sim, &mut fcsv, &mut ecsv);
             let r = sim.run(frames, |s, _| {
@@ -293,15 +285,7 @@ fn run(a: &Args) -> Result<(), String> {
                     );
                 }
                 let _ = fc.write_all(line.as_bytes());
-                let e = sim.system.energy(sim.time, &sim.state).unwrap_or_default();
-                let _ = writeln!(
-                    ec,
-                    "{},{},{},{}",
-                    sim.time,
-                    e.kinetic,
-                    e.potential,
-                    e.total()
-                );
+                energy_row(ec, sim.time, sim.system.energy(sim.time, &sim.state));
             };
             rows(&sim, &mut fcsv, &mut ecsv);
             if a.obj {
@@ -337,6 +321,16 @@ fn run(a: &Args) -> Result<(), String> {
             out.display()
         )),
     }
+}
+
+/// One line of energy.csv.
+fn energy_row(
+    ec: &mut BufWriter<fs::File>,
+    time: Scalar,
+    e: Option<bevy_soft_body::prelude::Energy>,
+) {
+    let e = e.unwrap_or_default();
+    let _ = writeln!(ec, "{},{},{},{}", time, e.kinetic, e.potential, e.total());
 }
 
 fn summary(
