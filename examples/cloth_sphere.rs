@@ -10,9 +10,10 @@
 //! ```
 //!
 //! Letters: e forward Euler, s symplectic Euler, t trapezoid, m midpoint, r RK4, a RK45,
-//! i linearly implicit Euler (`cloth_sphere -- i 0.0166` takes one step per frame).
+//! i linearly implicit Euler (`cloth_sphere -- i 0.0166` takes one step per frame),
+//! d trapezoid with implicit damping, b backward Euler (Newton).
 //!
-//! Keys: Space pause/resume, R reset, E/S/T/M/K/A/I switch integrator (K = RK4),
+//! Keys: Space pause/resume, R reset, E/S/T/M/K/A/I/D/B switch integrator (K = RK4),
 //! Left/Right orbit the camera, Up/Down zoom.
 //!
 //! `--screenshot FILE [--frames N]` renders N frames of exactly 1/60 s each (default 270, the
@@ -317,6 +318,7 @@ fn keys(
         (KeyCode::KeyA, IntegratorKind::Rk45),
         (KeyCode::KeyI, IntegratorKind::LinearlyImplicitEuler),
         (KeyCode::KeyD, IntegratorKind::ImplicitDampingTrapezoid),
+        (KeyCode::KeyB, IntegratorKind::BackwardEuler),
     ] {
         if input.just_pressed(key) {
             sim.config.integrator = kind;

@@ -13,7 +13,8 @@
 //! last good frame is kept on disk, and the exit status is 2.
 //!
 //! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly`,
-//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d` (or a name), `--h STEP`, `--cfl NUMBER`,
+//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b` (or a name), `--h STEP`, `--cfl NUMBER`,
+//! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
 //! `--no-guard`, `--obj`, `--out DIR`, `--quiet`.
 
@@ -34,6 +35,7 @@ struct Args {
     integrator: IntegratorKind,
     h: f64,
     cfl: Option<f64>,
+    cfl_limit: CflLimit,
     duration: f64,
     fps: f64,
     size: usize,
@@ -52,6 +54,7 @@ fn parse_args() -> Result<Args, String> {
         integrator: IntegratorKind::Rk4,
         h: 1e-3,
         cfl: None,
+        cfl_limit: CflLimit::Oscillation,
         duration: 5.0,
         fps: 60.0,
         size: 16,
@@ -77,6 +80,18 @@ fn parse_args() -> Result<Args, String> {
             }
             "--h" => a.h = num(val("--h")?, "--h")?,
             "--cfl" => a.cfl = Some(num(val("--cfl")?, "--cfl")?),
+            "--cfl-limit" => {
+                a.cfl_limit = match val("--cfl-limit")?.as_str() {
+                    "oscillation" => CflLimit::Oscillation,
+                    "physbam" => CflLimit::PhysBam,
+                    "physbam_later" | "physbam2" => CflLimit::PhysBamLater,
+                    o => {
+                        return Err(format!(
+                            "--cfl-limit: unknown '{o}' (oscillation, physbam, physbam_later)"
+                        ));
+                    }
+                }
+            }
             "--duration" => a.duration = num(val("--duration")?, "--duration")?,
             "--fps" => a.fps = num(val("--fps")?, "--fps")?,
             "--size" => {
@@ -151,7 +166,11 @@ fn config(a: &Args) -> DriverConfig {
     DriverConfig {
         integrator: a.integrator,
         policy: match a.cfl {
-            Some(number) => StepPolicy::Cfl { number, max: a.h },
+            Some(number) => StepPolicy::Cfl {
+                number,
+                max: a.h,
+                limit: a.cfl_limit,
+            },
             None => StepPolicy::Fixed { h: a.h },
         },
         frame_dt: 1.0 / a.fps,

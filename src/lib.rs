@@ -35,7 +35,7 @@ pub mod prelude {
     pub use crate::core::build;
     pub use crate::core::collide::{Collider, ColliderDesc, ContactMaterial, ShapeDesc};
     pub use crate::core::driver::{
-        Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
+        CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
     };
     pub use crate::core::forces::{SpringLaw, Wind};
     pub use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, StepError};

@@ -280,6 +280,7 @@ fn cfl_policy_follows_the_springs() {
         policy: StepPolicy::Cfl {
             number: 0.5,
             max: 1.0,
+            limit: CflLimit::Oscillation,
         },
         ..Default::default()
     };
@@ -290,6 +291,49 @@ fn cfl_policy_follows_the_springs() {
         "{}",
         sim.step_size()
     );
+}
+
+#[test]
+fn physbam_cfl_forms_reproduce_the_slides_maximum_dt() {
+    // The slides' wire: 11 particles of 1/11 kg, l₀ = 0.1 m, E = 10 N (k = E/l₀ = 100 N/m),
+    // b = 10 N·s/m. Between two free particles μ = m/2 = 1/22 kg (the link to the moving
+    // endpoint has μ = m). Maximum_Dt = CFL · min(μ l₀/b, b l₀/E) = 0.5 · min(4.545e-4, 0.1);
+    // the later form's elastic term 2 b l₀/E = 0.2 s does not change the minimum; the
+    // oscillation form takes √(μ/k) = 0.0213 s and μ/b = 4.545e-3 s.
+    let (model, state) = build::wire(11, 0.05, 100).unwrap().build().unwrap();
+    let mu: f64 = 1.0 / 22.0;
+    for (limit, expected) in [
+        (CflLimit::PhysBam, 0.5 * mu * 0.1 / 10.0),
+        (CflLimit::PhysBamLater, 0.5 * mu * 0.1 / 10.0),
+        (CflLimit::Oscillation, 0.5 * mu / 10.0),
+    ] {
+        let cfg = DriverConfig {
+            policy: StepPolicy::Cfl {
+                number: 0.5,
+                max: 1.0,
+                limit,
+            },
+            ..Default::default()
+        };
+        let sim = Simulation::new(model.clone(), state.clone(), cfg);
+        let h = sim.step_size() as f64;
+        println!("{limit:?}: h = {h:.4e} s (expected {expected:.4e})");
+        assert!(
+            (h - expected).abs() < 1e-6 * expected,
+            "{limit:?}: {h} vs {expected}"
+        );
+    }
+    // Weak dampers (b = 0.01 N·s/m): μ l₀/b = 0.45 s, and the elastic terms decide:
+    // b/k = 1e-4 s in the first form, 2b/k = 2e-4 s in the later one.
+    let mut weak = model.clone();
+    for s in weak.springs.as_mut_slice() {
+        s.damping = 0.01;
+    }
+    weak.springs.refresh();
+    let first = weak.spring_bound(CflLimit::PhysBam).unwrap() as f64;
+    let later = weak.spring_bound(CflLimit::PhysBamLater).unwrap() as f64;
+    assert!((first - 1e-4).abs() < 1e-6 * 1e-4 * 10.0, "{first}");
+    assert!((later - 2e-4).abs() < 1e-6 * 2e-4 * 10.0, "{later}");
 }
 
 fn seed_cloth() -> (ParticleModel, ParticleState) {

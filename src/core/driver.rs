@@ -19,14 +19,42 @@ pub enum StepPolicy {
         /// Step size (s).
         h: f64,
     },
-    /// `h = number × (spring time scale)`, the smallest over springs of `√(μ/k)` and `μ/b`
-    /// (explicit stability limits of one spring), capped by `max`.
+    /// `h = number × (spring time scale)`, capped by `max`; the time scale is the smallest
+    /// over springs of the bounds `limit` names.
     Cfl {
         /// CFL number (0.5 in the PhysBAM slides).
         number: f64,
         /// Upper bound on the step (s).
         max: f64,
+        /// Which per-spring bounds.
+        #[serde(default)]
+        limit: CflLimit,
     },
+}
+
+/// Per-spring time bounds a CFL step policy takes the minimum of. `μ` is the reduced mass of
+/// the spring's two free ends, `l₀` its rest length, `k` its Hooke stiffness (N/m) and `b` its
+/// damper (N·s/m, the force `−b (n·v_rel) n` of the slides). A strain-law spring of "Young's
+/// modulus" `E` (N), as in the PhysBAM slides, has `k = E/l₀`, so the slides' `b·l₀/E` is
+/// `b/k`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CflLimit {
+    /// `√(μ/k)` and `μ/b`: one spring's oscillation time (`1/ω`) and damping time — the
+    /// explicit methods' limits up to their stability constants.
+    #[default]
+    Oscillation,
+    /// The PhysBAM slides' `Maximum_Dt`, literally: `μ·l₀/b` (damping) and `b·l₀/E = b/k`
+    /// (elastic). The damping term is the explicit damping limit `μ/b` times `l₀` in metres —
+    /// not a time unless `l₀` is read as 1 — so it is more cautious than `μ/b` for springs
+    /// shorter than a metre, as in the slides' wire (`l₀ = 0.1`).
+    PhysBam,
+    /// The slides' later form: `μ·l₀/b` and `2b/k` — the elastic term is exactly the stability
+    /// limit of the implicit-damping trapezoid on one overdamped spring (characteristic
+    /// polynomial `λ² − (1 − a)λ + a` with `a = hk/2b`, stable while `a < 1`).
+    ///
+    /// In both PhysBAM forms, springs without a damper use `√(μ/k)` for the elastic term.
+    PhysBamLater,
 }
 
 impl Default for StepPolicy {
@@ -85,7 +113,10 @@ impl fmt::Display for Divergence {
                 "a smaller h (below the elastic limit 2b/k of the stiffest spring) or linearly implicit Euler"
             }
             IntegratorKind::LinearlyImplicitEuler => {
-                "a smaller h, or check the scene for invalid or extreme parameters"
+                "a smaller h, backward Euler (Newton), or check the scene for invalid or extreme parameters"
+            }
+            IntegratorKind::BackwardEuler => {
+                "check the scene for free particles without mass, negative stiffness or non-finite values"
             }
             _ => "a smaller h, more damping, or an implicit method (linearly implicit Euler)",
         };
@@ -203,8 +234,11 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     pub fn step_size(&self) -> Scalar {
         match self.config.policy {
             StepPolicy::Fixed { h } => h as Scalar,
-            StepPolicy::Cfl { number, max } => {
-                let ts = self.system.time_scale().unwrap_or(Scalar::INFINITY);
+            StepPolicy::Cfl { number, max, limit } => {
+                let ts = self
+                    .system
+                    .cfl_time_scale(limit)
+                    .unwrap_or(Scalar::INFINITY);
                 (number as Scalar * ts).min(max as Scalar)
             }
         }

@@ -14,10 +14,47 @@ use crate::core::forces::PackedSpring;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
 use crate::core::solve::SpringMatrix;
-use crate::math::{Matrix3, Scalar, Vector};
+use crate::math::{Matrix3, Scalar, Vector, to_f64};
 
 fn outer(a: Vector, b: Vector) -> Matrix3 {
     Matrix3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// `K_s = k [n nᵀ + (1 − L/l)(I − n nᵀ)]` of a spring of length `l > 0` along unit `n`, with
+/// `n nᵀ` and `I − n nᵀ` (the definite option clamps `1 − L/l` at zero, which is exactly the
+/// projection of `K_s` onto the positive semi-definite cone: its eigenvalues are `k` along `n`
+/// and `k (1 − L/l)` twice across it).
+fn stiffness_block(s: &PackedSpring, n: Vector, l: Scalar, definite: bool) -> [Matrix3; 3] {
+    let nn = outer(n, n);
+    let proj = Matrix3::IDENTITY - nn;
+    let mut geo = 1.0 - s.rest / l;
+    if definite && geo < 0.0 {
+        geo = 0.0;
+    }
+    [(nn + proj * geo) * s.k, nn, proj]
+}
+
+/// `K_s` of one spring at positions `x` (`k I` for a zero-length spring, which has no
+/// direction: a definite stand-in for the linearization).
+pub fn spring_stiffness(s: &PackedSpring, x: &[Vector], definite: bool) -> Matrix3 {
+    let d = x[s.i as usize] - x[s.j as usize];
+    let l = d.length();
+    if l == 0.0 {
+        return Matrix3::IDENTITY * s.k;
+    }
+    stiffness_block(s, d / l, l, definite)[0]
+}
+
+/// The damper block `b n nᵀ` of one spring along its direction at positions `x` (zero for a
+/// zero-length or undamped spring).
+pub fn damper_block(s: &PackedSpring, x: &[Vector]) -> Matrix3 {
+    let d = x[s.i as usize] - x[s.j as usize];
+    let l = d.length();
+    if l == 0.0 || s.damping == 0.0 {
+        return Matrix3::ZERO;
+    }
+    let n = d / l;
+    outer(n, n) * s.damping
 }
 
 /// `K_s`, `b n nᵀ` and the damper's position block `G_s` of one spring.
@@ -36,13 +73,7 @@ pub fn spring_blocks(
         return (Matrix3::IDENTITY * s.k, Matrix3::ZERO, Matrix3::ZERO);
     }
     let n = d / l;
-    let nn = outer(n, n);
-    let proj = Matrix3::IDENTITY - nn;
-    let mut geo = 1.0 - s.rest / l;
-    if definite && geo < 0.0 {
-        geo = 0.0;
-    }
-    let ks = (nn + proj * geo) * s.k;
+    let [ks, nn, proj] = stiffness_block(s, n, l, definite);
     let ds = nn * s.damping;
     let gs = if s.damping != 0.0 {
         let vr = v[i] - v[j];
@@ -100,8 +131,10 @@ pub trait Linearization: Sync {
     fn matrix_matches(&self, a: &SpringMatrix) -> bool;
     /// Masses.
     fn masses(&self) -> &[Scalar];
-    /// `mask[i] = 1` for particles moved by forces, 0 for pinned and prescribed ones.
-    fn free_mask(&self, mask: &mut [Scalar]);
+    /// `mask[i] = 1` for particles moved by forces, 0 for pinned and prescribed ones. Returns
+    /// false when some particle that is neither pinned nor prescribed has no valid mass (the
+    /// implicit system is singular there: a reported failure, not a step).
+    fn free_mask(&self, mask: &mut [Scalar]) -> bool;
     /// Total force on each particle (gravity as `m g` included) at `(t, state)`.
     fn total_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]);
     /// Forces except the ones linear in velocity (dampers, drag, wind's drag): springs'
@@ -118,6 +151,43 @@ pub trait Linearization: Sync {
         definite: bool,
         a: &mut SpringMatrix,
         kv: &mut [Vector],
+    );
+    /// Velocities of the constrained particles over a step of length `h` ending at `t_end`:
+    /// zero for pinned ones, `(p(t_end) − x₀)/h` for prescribed ones, so that `x₀ + h v` lands
+    /// on their path. Free entries of `v` are left alone.
+    fn constrained_velocities(&self, t_end: Scalar, h: Scalar, x0: &[Vector], v: &mut [Vector]);
+    /// Backward Euler's incremental potential (CSC417's "backward Euler as minimization"):
+    ///
+    /// `Φ(v) = ½ (v − v₀)ᵀ M (v − v₀) + E(x₀ + h v) + h R(v)`,
+    ///
+    /// `E` the potential energy (springs, gravity, external forces and the wind's push at
+    /// `t_end`), `R` the Rayleigh dissipation `½ Σ b (n₀·(v_i − v_j))² + ½ c Σ |v_i|²` of the
+    /// dampers (along their direction at `x₀`) and of drag. `∇Φ = M (v − v₀) − h f(x₀ + h v, v)`,
+    /// so its minimizer is the backward Euler velocity. Writes `x = x₀ + h v` and, when asked,
+    /// the gradient (zero on constrained particles). Sums over free particles only. The value
+    /// is computed and summed in `f64` whatever the crate's precision: a line search compares
+    /// values that differ in their last digits near convergence.
+    #[allow(clippy::too_many_arguments)]
+    fn incremental_potential(
+        &self,
+        t_end: Scalar,
+        h: Scalar,
+        x0: &[Vector],
+        v0: &[Vector],
+        v: &[Vector],
+        x: &mut [Vector],
+        grad: Option<&mut [Vector]>,
+    ) -> f64;
+    /// The Hessian of [`Linearization::incremental_potential`] at `x = x₀ + h v`:
+    /// `a = M + h c I + h Σ b n₀n₀ᵀ + h² K(x)`, with `definite` projecting each spring's `K_s`
+    /// onto the positive semi-definite cone.
+    fn assemble_incremental_hessian(
+        &self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &[Vector],
+        definite: bool,
+        a: &mut SpringMatrix,
     );
 }
 
@@ -138,13 +208,17 @@ impl Linearization for ParticleModel {
         self.mass()
     }
 
-    fn free_mask(&self, mask: &mut [Scalar]) {
+    fn free_mask(&self, mask: &mut [Scalar]) -> bool {
         // `pin` and `prescribe` zero a particle's inverse mass and `release` restores it, so a
         // positive inverse mass is exactly "free with a valid mass" — no scan of the pin list
-        // per particle on every implicit step.
+        // per particle on every implicit step. A particle is pinned or prescribed at most once,
+        // so any other zero is a free particle without a valid mass.
+        let mut zeros = 0;
         for (m, w) in mask.iter_mut().zip(self.inv_mass()) {
             *m = if *w > 0.0 { 1.0 } else { 0.0 };
+            zeros += (*w <= 0.0) as usize;
         }
+        zeros == self.pins().len() + self.motions().len()
     }
 
     fn total_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]) {
@@ -225,6 +299,122 @@ impl Linearization for ParticleModel {
             let kvr = ks * (state.v[i] - state.v[j]);
             kv[i] -= kvr;
             kv[j] += kvr;
+        }
+    }
+
+    fn constrained_velocities(&self, t_end: Scalar, h: Scalar, x0: &[Vector], v: &mut [Vector]) {
+        for &(p, _) in self.pins() {
+            v[p as usize] = Vector::ZERO;
+        }
+        for (p, m) in self.motions() {
+            let p = *p as usize;
+            v[p] = (m.eval(t_end).0 - x0[p]) / h;
+        }
+    }
+
+    fn incremental_potential(
+        &self,
+        t_end: Scalar,
+        h: Scalar,
+        x0: &[Vector],
+        v0: &[Vector],
+        v: &[Vector],
+        x: &mut [Vector],
+        mut grad: Option<&mut [Vector]>,
+    ) -> f64 {
+        for ((xi, x0i), vi) in x.iter_mut().zip(x0).zip(v) {
+            *xi = *x0i + *vi * h;
+        }
+        let d64 = |a: Vector| glam::DVec3::from_array(to_f64(a));
+        let h64 = h as f64;
+        let pos = |i: usize| d64(x0[i]) + d64(v[i]) * h64;
+        let mut phi = 0.0f64;
+        for s in self.springs.as_slice() {
+            let e = (pos(s.i as usize) - pos(s.j as usize)).length() - s.rest as f64;
+            phi += 0.5 * s.k as f64 * e * e;
+        }
+        if let Some(g) = grad.as_deref_mut() {
+            g.fill(Vector::ZERO);
+            if !self.springs.is_empty() {
+                self.springs.accumulate_elastic(x, g);
+            }
+            for gi in g.iter_mut() {
+                *gi *= -h;
+            }
+        }
+        let c = self.linear_drag();
+        let wc = self.wind_coefficient();
+        let push = if wc > 0.0 {
+            self.wind_velocity(t_end) * wc
+        } else {
+            Vector::ZERO
+        };
+        let ext = self.external_forces();
+        for i in 0..self.len() {
+            if self.inv_mass()[i] <= 0.0 {
+                if let Some(g) = grad.as_deref_mut() {
+                    g[i] = Vector::ZERO;
+                }
+                continue;
+            }
+            let m = self.mass()[i];
+            let dv = v[i] - v0[i];
+            let mut fc = self.gravity * m + push;
+            if let Some(e) = ext {
+                fc += e[i];
+            }
+            let (dv64, v64) = (d64(v[i]) - d64(v0[i]), d64(v[i]));
+            phi += 0.5 * m as f64 * dv64.length_squared() - d64(fc).dot(pos(i))
+                + 0.5 * h64 * c as f64 * v64.length_squared();
+            if let Some(g) = grad.as_deref_mut() {
+                g[i] += dv * m - fc * h + v[i] * (h * c);
+            }
+        }
+        if self.springs.has_damping() {
+            for s in self.springs.as_slice() {
+                let (i, j) = (s.i as usize, s.j as usize);
+                let d = x0[i] - x0[j];
+                let l = d.length();
+                if s.damping == 0.0 || l == 0.0 {
+                    continue;
+                }
+                let n = d / l;
+                let rate = n.dot(v[i] - v[j]);
+                let rate64 = d64(n).dot(d64(v[i]) - d64(v[j]));
+                phi += 0.5 * h64 * s.damping as f64 * rate64 * rate64;
+                if let Some(g) = grad.as_deref_mut() {
+                    let gi = n * (h * s.damping * rate);
+                    if self.inv_mass()[i] > 0.0 {
+                        g[i] += gi;
+                    }
+                    if self.inv_mass()[j] > 0.0 {
+                        g[j] -= gi;
+                    }
+                }
+            }
+        }
+        phi
+    }
+
+    fn assemble_incremental_hessian(
+        &self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &[Vector],
+        definite: bool,
+        a: &mut SpringMatrix,
+    ) {
+        let c = self.linear_drag();
+        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
+            *d = Matrix3::IDENTITY * (*m + h * c);
+        }
+        let h2 = h * h;
+        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
+            let blk = spring_stiffness(s, x, definite) * h2 + damper_block(s, x0) * h;
+            let (i, j) = (s.i as usize, s.j as usize);
+            a.diag[i] += blk;
+            a.diag[j] += blk;
+            *o = -blk;
         }
     }
 }

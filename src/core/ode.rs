@@ -92,6 +92,13 @@ pub trait OdeSystem<S: OdeState>: Sync {
         None
     }
 
+    /// The time scale a CFL step policy with the given per-spring bounds multiplies
+    /// (default: [`OdeSystem::time_scale`]).
+    fn cfl_time_scale(&self, limit: crate::core::driver::CflLimit) -> Option<Scalar> {
+        let _ = limit;
+        self.time_scale()
+    }
+
     /// Collision response after a step ending at `t` of size `h` (default: none).
     fn resolve_contacts(&self, _t: Scalar, _h: Scalar, _state: &mut S) {}
 

@@ -5,6 +5,7 @@
 //! and the forces it has. Every force is optional and costs nothing when absent.
 
 use crate::core::collide::Collider;
+use crate::core::driver::CflLimit;
 use crate::core::forces::{Springs, Wind, WindField};
 use crate::core::motion::Motion;
 use crate::core::ode::{Energy, OdeSystem, ParticleState};
@@ -333,6 +334,12 @@ impl ParticleModel {
     /// mass of the two free ends (the period and damping time of one spring, up to 2π);
     /// `None` when no spring constrains it.
     pub fn spring_time_scale(&self) -> Option<Scalar> {
+        self.spring_bound(CflLimit::Oscillation)
+    }
+
+    /// Smallest per-spring time bound of the given form (see [`CflLimit`]) over springs with a
+    /// free end; `None` when no spring constrains the step.
+    pub fn spring_bound(&self, limit: CflLimit) -> Option<Scalar> {
         let mut best: Option<Scalar> = None;
         for s in self.springs.as_slice() {
             let (wi, wj) = (self.inv_mass[s.i as usize], self.inv_mass[s.j as usize]);
@@ -342,11 +349,19 @@ impl ParticleModel {
             }
             let mu = 1.0 / w;
             let mut dt = Scalar::INFINITY;
+            let damped = s.damping > 0.0;
             if s.k > 0.0 {
-                dt = dt.min((mu / s.k).sqrt());
+                dt = dt.min(match limit {
+                    CflLimit::PhysBam if damped => s.damping / s.k,
+                    CflLimit::PhysBamLater if damped => 2.0 * s.damping / s.k,
+                    _ => (mu / s.k).sqrt(),
+                });
             }
-            if s.damping > 0.0 {
-                dt = dt.min(mu / s.damping);
+            if damped {
+                dt = dt.min(match limit {
+                    CflLimit::Oscillation => mu / s.damping,
+                    CflLimit::PhysBam | CflLimit::PhysBamLater => mu * s.rest / s.damping,
+                });
             }
             if dt.is_finite() {
                 best = Some(best.map_or(dt, |b: Scalar| b.min(dt)));
@@ -483,6 +498,10 @@ impl OdeSystem<ParticleState> for ParticleModel {
 
     fn time_scale(&self) -> Option<Scalar> {
         self.spring_time_scale()
+    }
+
+    fn cfl_time_scale(&self, limit: CflLimit) -> Option<Scalar> {
+        self.spring_bound(limit)
     }
 
     fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {

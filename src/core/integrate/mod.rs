@@ -20,7 +20,7 @@ mod implicit;
 
 pub use adaptive::{AdaptiveConfig, DormandPrince};
 pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
-pub use implicit::{ImplicitDampingTrapezoid, LinearlyImplicitEuler};
+pub use implicit::{BackwardEuler, ImplicitDampingTrapezoid, LinearlyImplicitEuler, NewtonReport};
 
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::math::Scalar;
@@ -50,6 +50,8 @@ pub enum IntegratorKind {
     LinearlyImplicitEuler,
     /// `d`: the PhysBAM slides' trapezoid with implicit damping, solved with PCG.
     ImplicitDampingTrapezoid,
+    /// `b`: backward Euler as minimization, Newton with a backtracking line search.
+    BackwardEuler,
 }
 
 /// Number of explicit kinds in [`IntegratorKind::ALL`].
@@ -67,7 +69,7 @@ const N_EXPLICIT: usize = {
 
 impl IntegratorKind {
     /// Every kind, in the order charts and tables list them.
-    pub const ALL: [IntegratorKind; 8] = [
+    pub const ALL: [IntegratorKind; 9] = [
         IntegratorKind::ForwardEuler,
         IntegratorKind::SymplecticEuler,
         IntegratorKind::Trapezoid,
@@ -76,6 +78,7 @@ impl IntegratorKind {
         IntegratorKind::Rk45,
         IntegratorKind::LinearlyImplicitEuler,
         IntegratorKind::ImplicitDampingTrapezoid,
+        IntegratorKind::BackwardEuler,
     ];
 
     /// The explicit kinds (those that work on any [`OdeSystem`]): [`IntegratorKind::ALL`]
@@ -104,6 +107,7 @@ impl IntegratorKind {
             Self::Rk45 => 'a',
             Self::LinearlyImplicitEuler => 'i',
             Self::ImplicitDampingTrapezoid => 'd',
+            Self::BackwardEuler => 'b',
         }
     }
 
@@ -118,6 +122,7 @@ impl IntegratorKind {
             Self::Rk45 => "rk45",
             Self::LinearlyImplicitEuler => "linearly_implicit_euler",
             Self::ImplicitDampingTrapezoid => "implicit_damping_trapezoid",
+            Self::BackwardEuler => "backward_euler",
         }
     }
 
@@ -132,6 +137,7 @@ impl IntegratorKind {
             Self::Rk45 => "RK45 (Dormand-Prince)",
             Self::LinearlyImplicitEuler => "linearly implicit Euler",
             Self::ImplicitDampingTrapezoid => "trapezoid with implicit damping",
+            Self::BackwardEuler => "backward Euler (Newton)",
         }
     }
 
@@ -142,20 +148,23 @@ impl IntegratorKind {
             Self::ForwardEuler
             | Self::SymplecticEuler
             | Self::LinearlyImplicitEuler
-            | Self::ImplicitDampingTrapezoid => 1,
+            | Self::ImplicitDampingTrapezoid
+            | Self::BackwardEuler => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 5,
         }
     }
 
-    /// Derivative evaluations per (accepted, fixed) step.
+    /// Derivative evaluations per (accepted, fixed) step (for backward Euler, per Newton
+    /// iteration without line-search backtracking).
     pub fn stages(self) -> u32 {
         match self {
             Self::ForwardEuler
             | Self::SymplecticEuler
             | Self::LinearlyImplicitEuler
-            | Self::ImplicitDampingTrapezoid => 1,
+            | Self::ImplicitDampingTrapezoid
+            | Self::BackwardEuler => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 6,
@@ -171,7 +180,7 @@ impl IntegratorKind {
     pub const fn is_implicit(self) -> bool {
         matches!(
             self,
-            Self::LinearlyImplicitEuler | Self::ImplicitDampingTrapezoid
+            Self::LinearlyImplicitEuler | Self::ImplicitDampingTrapezoid | Self::BackwardEuler
         )
     }
 
@@ -189,6 +198,7 @@ impl IntegratorKind {
             Self::Rk45 => Box::new(DormandPrince::new(adaptive)),
             Self::LinearlyImplicitEuler => Box::new(LinearlyImplicitEuler::default()),
             Self::ImplicitDampingTrapezoid => Box::new(ImplicitDampingTrapezoid::default()),
+            Self::BackwardEuler => Box::new(BackwardEuler::default()),
         }
     }
 }
@@ -239,6 +249,7 @@ impl FromStr for IntegratorKind {
             "d" | "implicit_damping" | "implicit_damping_trapezoid" | "physbam" => {
                 Self::ImplicitDampingTrapezoid
             }
+            "b" | "backward_euler" | "implicit_euler" | "newton" => Self::BackwardEuler,
             _ => return Err(UnknownIntegrator(s.to_string())),
         };
         Ok(k)
@@ -259,6 +270,10 @@ pub enum StepError {
     NeedsSecondOrder(IntegratorKind),
     /// The method needs the system's force Jacobians, which this system does not provide.
     NeedsJacobians(IntegratorKind),
+    /// The linear solve failed: the system matrix is not positive definite on the free
+    /// degrees of freedom (a free particle without mass, a negative stiffness) or a value was
+    /// not finite. The state is unchanged.
+    SolverFailed(IntegratorKind),
 }
 
 impl fmt::Display for StepError {
@@ -281,6 +296,11 @@ impl fmt::Display for StepError {
             Self::NeedsJacobians(k) => {
                 write!(f, "{} needs a system with force Jacobians", k.label())
             }
+            Self::SolverFailed(k) => write!(
+                f,
+                "{}: the linear solve failed (matrix not positive definite on the free particles, or not finite); check for free particles without mass and negative stiffness",
+                k.label()
+            ),
         }
     }
 }
@@ -296,8 +316,12 @@ pub struct IntegratorStats {
     pub rejected: u64,
     /// Derivative (force) evaluations.
     pub evaluations: u64,
-    /// Linear-solver iterations (implicit methods).
+    /// Linear-solver iterations (implicit methods; direct solves count none).
     pub linear_iterations: u64,
+    /// Linear solves (implicit methods: one per step, one per Newton iteration).
+    pub linear_solves: u64,
+    /// Newton iterations (backward Euler).
+    pub newton_iterations: u64,
 }
 
 /// A time integrator for states `S` of systems `Sys`.

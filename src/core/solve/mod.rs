@@ -1,6 +1,10 @@
 //! Linear algebra for implicit steps: a symmetric block-sparse matrix with the sparsity of a
-//! spring network, and preconditioned conjugate gradients with Baraff–Witkin's constraint
-//! filter.
+//! spring network, preconditioned conjugate gradients with Baraff–Witkin's constraint filter,
+//! and a sparse direct (Cholesky) solve through faer.
+
+mod cholesky;
+
+pub use cholesky::SparseCholesky;
 
 use crate::core::forces::Springs;
 use crate::math::{Matrix3, Scalar, Vector};
@@ -97,6 +101,63 @@ pub struct PcgReport {
     pub relative_residual: Scalar,
     /// True when the tolerance was met.
     pub converged: bool,
+    /// True when the solve broke down: the matrix is not positive definite on the free
+    /// degrees of freedom (a non-positive curvature or pivot), or a value is not finite. The
+    /// solution must not be used.
+    pub failed: bool,
+}
+
+/// What a linear solve did (both solvers report the same way; direct solves report zero
+/// iterations).
+pub type SolveReport = PcgReport;
+
+/// Which linear solver an implicit method uses.
+#[derive(Clone, Debug)]
+pub enum LinearSolver {
+    /// Block-Jacobi preconditioned conjugate gradients (no factorization; cheap per step,
+    /// iterations grow with stiffness and size).
+    Pcg(Pcg),
+    /// Sparse Cholesky `L Lᵀ` of the free degrees of freedom (faer; fill-reducing AMD
+    /// ordering; symbolic factorization once per structure). Exact to round-off, for Newton
+    /// steps that need accurate directions.
+    Cholesky(Box<SparseCholesky>),
+}
+
+impl Default for LinearSolver {
+    fn default() -> Self {
+        LinearSolver::Pcg(Pcg::default())
+    }
+}
+
+impl LinearSolver {
+    /// The sparse Cholesky solver.
+    pub fn cholesky() -> Self {
+        LinearSolver::Cholesky(Box::default())
+    }
+
+    /// Solves `A x = b` on the free degrees of freedom (`mask[i] = 1`); entries with
+    /// `mask[i] = 0` keep their value in `x` (and their coupling is moved to the right-hand
+    /// side). `x` is the starting guess for PCG.
+    pub fn solve(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+    ) -> SolveReport {
+        match self {
+            LinearSolver::Pcg(p) => p.solve(a, b, x, mask),
+            LinearSolver::Cholesky(c) => c.solve(a, b, x, mask),
+        }
+    }
+
+    /// A short name for tables.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LinearSolver::Pcg(_) => "pcg",
+            LinearSolver::Cholesky(_) => "cholesky",
+        }
+    }
 }
 
 /// Preconditioned conjugate gradients (block-Jacobi preconditioner) for symmetric positive
@@ -185,6 +246,7 @@ impl Pcg {
                 iterations: 0,
                 relative_residual: 0.0,
                 converged: true,
+                failed: false,
             };
         }
         for i in 0..n {
@@ -194,14 +256,16 @@ impl Pcg {
         let mut rz = dot(&self.r, &self.z);
         let mut it = 0;
         let mut rel = dot(&self.r, &self.r).sqrt() / bnorm;
-        while rel > self.tolerance && it < self.max_iterations {
+        let mut failed = !rel.is_finite();
+        while rel > self.tolerance && it < self.max_iterations && !failed {
             a.mul(&self.p, &mut self.q);
             for (qi, m) in self.q.iter_mut().zip(mask) {
                 *qi *= *m;
             }
             let pq = dot(&self.p, &self.q);
             if pq.is_nan() || pq <= 0.0 {
-                // Not positive definite along p (or breakdown): stop with what we have.
+                // Not positive definite along p, or a non-finite value: the answer is unusable.
+                failed = true;
                 break;
             }
             let alpha = rz / pq;
@@ -218,11 +282,13 @@ impl Pcg {
             }
             it += 1;
             rel = dot(&self.r, &self.r).sqrt() / bnorm;
+            failed |= !rel.is_finite();
         }
         PcgReport {
             iterations: it,
             relative_residual: rel,
-            converged: rel <= self.tolerance,
+            converged: !failed && rel <= self.tolerance,
+            failed,
         }
     }
 }

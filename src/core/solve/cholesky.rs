@@ -1,0 +1,349 @@
+//! Sparse direct solves of [`SpringMatrix`] systems with faer's Cholesky factorization.
+//!
+//! Only the free degrees of freedom enter the factorization (pinned and prescribed particles
+//! are eliminated, their known values moved to the right-hand side), so the factored matrix
+//! is the same symmetric positive definite one the filtered PCG iterates on. The symbolic
+//! analysis (AMD ordering, elimination tree, supernodes) is done once per structure — the
+//! spring list and the set of free particles — and every later solve only refills values,
+//! factors and substitutes, in `f64` whatever the crate's precision, into buffers it keeps
+//! (no allocation per solve).
+
+use super::{PcgReport, SpringMatrix};
+use crate::math::{Scalar, Vector};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par, Side};
+
+/// Where a spring's off-diagonal block lands in the factored matrix.
+#[derive(Clone, Copy, Debug)]
+enum OffSlot {
+    /// An end is constrained: the block only moves known values to the right-hand side.
+    Skip,
+    /// Both ends free and distinct: nine upper-triangle positions.
+    Off([u32; 9]),
+    /// A self spring on a free particle: added twice to its diagonal block.
+    SelfBlock(u32),
+}
+
+/// The structure the factorization was analysed for.
+struct Analysis {
+    pairs: Vec<(u32, u32)>,
+    free: Vec<u32>,
+    dim: usize,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    diag_pos: Vec<[u32; 6]>,
+    off_pos: Vec<OffSlot>,
+    symbolic: SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    buf: MemBuffer,
+}
+
+/// Sparse Cholesky solver for [`SpringMatrix`] systems (see the module docs). Reports a
+/// failure — never a NaN answer — when the free part of the matrix is not numerically positive
+/// definite (a zero-mass free particle, a wrong-signed stiffness).
+#[derive(Default)]
+pub struct SparseCholesky {
+    analysis: Option<Analysis>,
+    values: Vec<f64>,
+    rhs: Vec<f64>,
+    xc: Vec<Vector>,
+    q: Vec<Vector>,
+    /// Symbolic analyses done so far (one per structure change).
+    pub analyses: u64,
+}
+
+impl Clone for SparseCholesky {
+    /// A fresh solver (the factorization is redone on first use).
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for SparseCholesky {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SparseCholesky")
+            .field("dim", &self.analysis.as_ref().map(|a| a.dim))
+            .field(
+                "factor_len",
+                &self.analysis.as_ref().map(|a| a.l_values.len()),
+            )
+            .field("analyses", &self.analyses)
+            .finish()
+    }
+}
+
+/// Upper-triangle entries of a 3×3 block, in (column, row) order.
+const UPPER: [(usize, usize); 6] = [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)];
+
+fn failed() -> PcgReport {
+    PcgReport {
+        iterations: 0,
+        relative_residual: Scalar::INFINITY,
+        converged: false,
+        failed: true,
+    }
+}
+
+impl SparseCholesky {
+    /// A solver with nothing analysed yet.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Nonzeros of the Cholesky factor (fill-in included), once analysed.
+    pub fn factor_nonzeros(&self) -> Option<usize> {
+        self.analysis.as_ref().map(|a| a.l_values.len())
+    }
+
+    fn matches(an: &Analysis, a: &SpringMatrix, mask: &[Scalar]) -> bool {
+        an.pairs == a.pairs()
+            && an.free.len() == mask.len()
+            && an
+                .free
+                .iter()
+                .zip(mask)
+                .all(|(f, m)| (*f != u32::MAX) == (*m != 0.0))
+    }
+
+    fn analyse(a: &SpringMatrix, mask: &[Scalar]) -> Option<Analysis> {
+        let mut free = Vec::with_capacity(mask.len());
+        let mut m = 0u32;
+        for &w in mask {
+            if w != 0.0 {
+                free.push(m);
+                m += 1;
+            } else {
+                free.push(u32::MAX);
+            }
+        }
+        let dim = 3 * m as usize;
+        // Upper-triangle keys (column, row) of every structural nonzero.
+        let mut keys: Vec<(usize, usize)> = Vec::new();
+        for &c in &free {
+            if c != u32::MAX {
+                let b = 3 * c as usize;
+                keys.extend(UPPER.iter().map(|&(cc, r)| (b + cc, b + r)));
+            }
+        }
+        for &(i, j) in a.pairs() {
+            let (ci, cj) = (free[i as usize], free[j as usize]);
+            if ci != u32::MAX && cj != u32::MAX && ci != cj {
+                let (p, q) = (3 * ci.min(cj) as usize, 3 * ci.max(cj) as usize);
+                for c in 0..3 {
+                    for r in 0..3 {
+                        keys.push((q + c, p + r));
+                    }
+                }
+            }
+        }
+        keys.sort_unstable();
+        keys.dedup();
+        let mut col_ptr = vec![0usize; dim + 1];
+        for &(c, _) in &keys {
+            col_ptr[c + 1] += 1;
+        }
+        for c in 0..dim {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        let row_idx: Vec<usize> = keys.iter().map(|&(_, r)| r).collect();
+        let pos = |key: (usize, usize)| keys.binary_search(&key).expect("structural key") as u32;
+        let diag_pos = free
+            .iter()
+            .map(|&c| {
+                let mut out = [0u32; 6];
+                if c != u32::MAX {
+                    let b = 3 * c as usize;
+                    for (o, &(cc, r)) in out.iter_mut().zip(&UPPER) {
+                        *o = pos((b + cc, b + r));
+                    }
+                }
+                out
+            })
+            .collect();
+        let off_pos = a
+            .pairs()
+            .iter()
+            .map(|&(i, j)| {
+                let (ci, cj) = (free[i as usize], free[j as usize]);
+                if ci == u32::MAX || cj == u32::MAX {
+                    OffSlot::Skip
+                } else if ci == cj {
+                    OffSlot::SelfBlock(i)
+                } else {
+                    let (p, q) = (3 * ci.min(cj) as usize, 3 * ci.max(cj) as usize);
+                    let mut out = [0u32; 9];
+                    for c in 0..3 {
+                        for r in 0..3 {
+                            out[3 * c + r] = pos((q + c, p + r));
+                        }
+                    }
+                    OffSlot::Off(out)
+                }
+            })
+            .collect();
+        let sym = SymbolicSparseColMatRef::new_checked(dim, dim, &col_ptr, None, &row_idx);
+        let symbolic = factorize_symbolic_cholesky(
+            sym,
+            Side::Upper,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .ok()?;
+        let l_values = vec![0.0; symbolic.len_val()];
+        let buf = MemBuffer::try_new(StackReq::any_of(&[
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
+        ]))
+        .ok()?;
+        Some(Analysis {
+            pairs: a.pairs().to_vec(),
+            free,
+            dim,
+            col_ptr,
+            row_idx,
+            diag_pos,
+            off_pos,
+            symbolic,
+            l_values,
+            buf,
+        })
+    }
+
+    /// Solves `A x = b` on the free degrees of freedom (`mask[i] = 1`); constrained entries of
+    /// `x` keep their value and their coupling to free ones is moved to the right-hand side,
+    /// exactly as [`super::Pcg::solve`] filters them, so both give the same answer.
+    #[allow(clippy::needless_range_loop)] // one index over parallel arrays
+    pub fn solve(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+    ) -> PcgReport {
+        let n = a.len();
+        if !self
+            .analysis
+            .as_ref()
+            .is_some_and(|an| Self::matches(an, a, mask))
+        {
+            self.analysis = Self::analyse(a, mask);
+            self.analyses += 1;
+        }
+        let Some(an) = self.analysis.as_mut() else {
+            return failed();
+        };
+        // Known values of constrained entries, moved to the right-hand side: b_f − A_fc x_c.
+        self.xc.resize(n, Vector::ZERO);
+        self.q.resize(n, Vector::ZERO);
+        for i in 0..n {
+            self.xc[i] = if mask[i] != 0.0 { Vector::ZERO } else { x[i] };
+        }
+        a.mul(&self.xc, &mut self.q);
+        self.rhs.resize(an.dim, 0.0);
+        let mut bnorm2 = 0.0f64;
+        for i in 0..n {
+            let c = an.free[i];
+            if c != u32::MAX {
+                let r = b[i] - self.q[i];
+                for k in 0..3 {
+                    self.rhs[3 * c as usize + k] = r[k] as f64;
+                }
+                bnorm2 += (b[i] * mask[i]).length_squared() as f64;
+            }
+        }
+        if !bnorm2.is_finite() {
+            return failed();
+        }
+        // Values of the free-free upper triangle.
+        self.values.clear();
+        self.values.resize(an.row_idx.len(), 0.0);
+        for (i, d) in a.diag.iter().enumerate() {
+            if an.free[i] != u32::MAX {
+                for (&p, &(c, r)) in an.diag_pos[i].iter().zip(&UPPER) {
+                    self.values[p as usize] += d.col(c)[r] as f64;
+                }
+            }
+        }
+        for (o, slot) in a.off.iter().zip(&an.off_pos) {
+            match slot {
+                OffSlot::Skip => {}
+                OffSlot::Off(pos) => {
+                    for c in 0..3 {
+                        for r in 0..3 {
+                            self.values[pos[3 * c + r] as usize] += o.col(c)[r] as f64;
+                        }
+                    }
+                }
+                OffSlot::SelfBlock(i) => {
+                    for (&p, &(c, r)) in an.diag_pos[*i as usize].iter().zip(&UPPER) {
+                        self.values[p as usize] += 2.0 * o.col(c)[r] as f64;
+                    }
+                }
+            }
+        }
+        if !self.values.iter().all(|v| v.is_finite()) {
+            return failed();
+        }
+        if an.dim == 0 {
+            return PcgReport {
+                iterations: 0,
+                relative_residual: 0.0,
+                converged: true,
+                failed: false,
+            };
+        }
+        let sym =
+            SymbolicSparseColMatRef::new_checked(an.dim, an.dim, &an.col_ptr, None, &an.row_idx);
+        let mat = SparseColMatRef::new(sym, &self.values);
+        let llt = match an.symbolic.factorize_numeric_llt::<f64>(
+            &mut an.l_values,
+            mat,
+            Side::Upper,
+            LltRegularization::default(),
+            Par::Seq,
+            MemStack::new(&mut an.buf),
+            Default::default(),
+        ) {
+            Ok(l) => l,
+            Err(_) => return failed(),
+        };
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut self.rhs, an.dim, 1),
+            Par::Seq,
+            MemStack::new(&mut an.buf),
+        );
+        if !self.rhs.iter().all(|v| v.is_finite()) {
+            return failed();
+        }
+        for i in 0..n {
+            let c = an.free[i];
+            if c != u32::MAX {
+                let s = 3 * c as usize;
+                x[i] = crate::math::vec3([self.rhs[s], self.rhs[s + 1], self.rhs[s + 2]]);
+            }
+        }
+        // The residual, for the report (one product; direct solves should reach round-off).
+        a.mul(x, &mut self.q);
+        let mut r2 = 0.0f64;
+        for i in 0..n {
+            r2 += ((b[i] - self.q[i]) * mask[i]).length_squared() as f64;
+        }
+        let rel = if bnorm2 > 0.0 {
+            (r2 / bnorm2).sqrt()
+        } else {
+            r2.sqrt()
+        };
+        PcgReport {
+            iterations: 0,
+            relative_residual: rel as Scalar,
+            converged: true,
+            failed: false,
+        }
+    }
+}
