@@ -10,7 +10,7 @@
 //! ```
 //!
 //! Letters: e forward Euler, s symplectic Euler, t trapezoid, m midpoint, r RK4, a RK45,
-//! i linearly implicit Euler (`cloth_sphere -- i 0.0166` takes one step per frame),
+//! i linearly implicit Euler (`cloth_sphere -- i 0.0167`: h above the 1/60 s frame, so each frame is one step),
 //! d trapezoid with implicit damping, b backward Euler (Newton).
 //!
 //! Keys: Space pause/resume, R reset, E/S/T/M/K/A/I/D/B switch integrator (K = RK4),

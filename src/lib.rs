@@ -7,7 +7,8 @@
 //! - [`core`]: the numerics, without Bevy — the ODE abstraction ([`core::ode`]), the
 //!   integrators ([`core::integrate`]), the particle model and its forces, collisions, scene
 //!   layouts ([`core::scene`], [`core::build`]) and the headless driver ([`core::driver`]).
-//! - the Bevy face (feature `plugin`, on by default).
+//! - the Bevy face (feature `plugin`, on by default): [`ecs`] (components, `SoftBodyPlugin`,
+//!   spawning scenes) and [`render`] (deforming meshes, gizmos).
 //!
 //! Layout is not driver: what a scene contains is described apart from how it is advanced,
 //! so switching from RK4 to symplectic Euler is one [`IntegratorKind`] value.
@@ -28,7 +29,11 @@
 #![allow(clippy::unnecessary_cast)]
 
 pub mod core;
+#[cfg(feature = "plugin")]
+pub mod ecs;
 pub mod math;
+#[cfg(feature = "plugin")]
+pub mod render;
 
 /// The names most programs need.
 pub mod prelude {
@@ -44,6 +49,15 @@ pub mod prelude {
     pub use crate::core::particles::ParticleModel;
     pub use crate::core::scene::{Scene, SceneError};
     pub use crate::math::{PRECISION, Scalar, Vector};
+
+    #[cfg(feature = "plugin")]
+    pub use crate::ecs::{
+        BodyParticles, BodySprings, BodyState, ExternalForce, GlobalWind, Particle, ParticleOf,
+        Pinned, ScriptedMotion, SoftBody, SoftBodyCollider, SoftBodyDiverged, SoftBodyInvalid,
+        SoftBodyPlugin, SoftBodySet, SoftBodyStatus, SoftBodyWind, SpawnSoftBody, Spring, SpringOf,
+    };
+    #[cfg(feature = "plugin")]
+    pub use crate::render::{SoftBodyDebug, SoftBodySurface};
 }
 
 pub use crate::core::integrate::IntegratorKind;

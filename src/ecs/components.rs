@@ -1,0 +1,403 @@
+//! Components and messages of the ECS face. Components are the layout: a [`SoftBody`] root,
+//! [`Particle`]s and [`Spring`]s that belong to it through Bevy relationships ([`ParticleOf`],
+//! [`SpringOf`]), [`Pinned`] particles, [`ExternalForce`]s, [`SoftBodyWind`], and
+//! [`SoftBodyCollider`]s anywhere in the world.
+
+use crate::core::driver::{CflLimit, Divergence, StepPolicy};
+use crate::core::forces::SpringLaw;
+use crate::core::integrate::IntegratorKind;
+use crate::core::motion::Motion;
+use bevy::prelude::*;
+use bevy::reflect::impl_reflect_opaque;
+use parry3d::shape::SharedShape;
+
+impl_reflect_opaque!((in bevy_soft_body::core::integrate) IntegratorKind(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Hash,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::driver) StepPolicy(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::driver) CflLimit(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::forces) SpringLaw(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Hash,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::motion) Motion(Clone, Debug, PartialEq, Serialize, Deserialize));
+
+/// The root of a soft body: how it is advanced. Particles join it with [`ParticleOf`] and
+/// springs with [`SpringOf`]. Editing this component (another integrator, step, drag...)
+/// rebuilds the body's packed model on the next step and clears a reported divergence.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+#[require(SoftBodyStatus, crate::ecs::plugin::BodySim)]
+pub struct SoftBody {
+    /// The time integrator.
+    pub integrator: IntegratorKind,
+    /// How the substep `h` is chosen; substeps land exactly on the fixed frame's end.
+    pub step: StepPolicy,
+    /// Viscous drag `−c v` on every free particle (N·s/m).
+    pub drag: f32,
+    /// Gravitational acceleration; `None`: `(0, −9.81, 0)`.
+    pub gravity: Option<Vec3>,
+    /// Stop stepping (the state is kept).
+    pub paused: bool,
+    /// Stop the body when its internal energy exceeds this multiple of its energy scale
+    /// (`None`: only non-finite states stop it).
+    pub energy_guard: Option<f32>,
+}
+
+impl Default for SoftBody {
+    fn default() -> Self {
+        Self {
+            integrator: IntegratorKind::Rk4,
+            step: StepPolicy::Fixed { h: 1.0 / 240.0 },
+            drag: 0.0,
+            gravity: None,
+            paused: false,
+            energy_guard: Some(100.0),
+        }
+    }
+}
+
+/// What a body is doing, written by the plugin every fixed step.
+#[derive(Component, Reflect, Clone, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodyStatus {
+    /// Running, paused, left out (invalid input) or stopped by a divergence.
+    pub state: BodyState,
+    /// Simulated time since the body's model was last (re)built (s).
+    pub time: f32,
+    /// Substeps in the last fixed step.
+    pub substeps: u32,
+    /// Wall time of the last fixed step of this body (ms).
+    pub step_ms: f32,
+    /// Particles and springs in the packed model.
+    pub particles: u32,
+    /// Springs in the packed model.
+    pub springs: u32,
+}
+
+/// The state a [`SoftBodyStatus`] reports.
+#[derive(Reflect, Clone, Debug, Default, PartialEq)]
+pub enum BodyState {
+    /// Not built yet.
+    #[default]
+    Pending,
+    /// Stepping.
+    Running,
+    /// [`SoftBody::paused`] is set.
+    Paused,
+    /// Left out of stepping because its input is invalid (the message names the culprit).
+    Invalid(String),
+    /// Stopped by a divergence; the last good state is kept (the message says what happened
+    /// and what to try).
+    Diverged(String),
+}
+
+/// A point mass of a soft body, in world space. Editing `position` or `velocity` teleports
+/// the particle on the next step.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct Particle {
+    /// Position (m).
+    pub position: Vec3,
+    /// Velocity (m/s).
+    pub velocity: Vec3,
+    /// Mass (kg); must be positive unless the particle is [`Pinned`].
+    pub mass: f32,
+}
+
+impl Default for Particle {
+    fn default() -> Self {
+        Self {
+            position: Vec3::ZERO,
+            velocity: Vec3::ZERO,
+            mass: 1.0,
+        }
+    }
+}
+
+impl Particle {
+    /// A particle at rest.
+    pub fn at(position: Vec3, mass: f32) -> Self {
+        Self {
+            position,
+            velocity: Vec3::ZERO,
+            mass,
+        }
+    }
+}
+
+/// The body a [`Particle`] belongs to.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship(relationship_target = BodyParticles)]
+pub struct ParticleOf(pub Entity);
+
+/// The particles of a body, in the order of its packed arrays (maintained by Bevy; despawning
+/// the body despawns them).
+#[derive(Component, Reflect, Clone, Debug, Default, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship_target(relationship = ParticleOf, linked_spawn)]
+pub struct BodyParticles(Vec<Entity>);
+
+impl BodyParticles {
+    /// The particle entities.
+    pub fn entities(&self) -> &[Entity] {
+        &self.0
+    }
+}
+
+/// A spring (and optional damper) between two particle entities of the same body.
+/// Despawning it cuts the spring; a spring whose particle is gone is left out with a warning.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Debug)]
+pub struct Spring {
+    /// First particle.
+    pub a: Entity,
+    /// Second particle.
+    pub b: Entity,
+    /// Rest length (m).
+    pub rest_length: f32,
+    /// Stiffness: N/m for [`SpringLaw::Hooke`], N for [`SpringLaw::Strain`].
+    pub stiffness: f32,
+    /// Damping along the spring (N·s/m).
+    pub damping: f32,
+    /// How stiffness is given.
+    pub law: SpringLaw,
+}
+
+/// The body a [`Spring`] belongs to.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship(relationship_target = BodySprings)]
+pub struct SpringOf(pub Entity);
+
+/// The springs of a body (maintained by Bevy; despawning the body despawns them).
+#[derive(Component, Reflect, Clone, Debug, Default, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship_target(relationship = SpringOf, linked_spawn)]
+pub struct BodySprings(Vec<Entity>);
+
+impl BodySprings {
+    /// The spring entities.
+    pub fn entities(&self) -> &[Entity] {
+        &self.0
+    }
+}
+
+/// Holds a particle: in place (no target), or at `target`'s `GlobalTransform` applied to
+/// `offset`, moving with the target's velocity (prescribed motion: the particle follows the
+/// target's path, linearly between fixed steps, landing on it at every step's end).
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct Pinned {
+    /// The entity to follow (`None`: fixed where the particle is when pinned).
+    pub target: Option<Entity>,
+    /// Offset in the target's local frame.
+    pub offset: Vec3,
+}
+
+impl Pinned {
+    /// Fixed in place.
+    pub fn here() -> Self {
+        Self::default()
+    }
+
+    /// Following `target` at `offset` in its frame.
+    pub fn to(target: Entity, offset: Vec3) -> Self {
+        Self {
+            target: Some(target),
+            offset,
+        }
+    }
+}
+
+/// A constant force on one particle (N).
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct ExternalForce(pub Vec3);
+
+/// Wind on a body: air drag `c (w(t) − v)` toward a constant velocity plus a seeded breeze of
+/// three sines. On the body root; the [`GlobalWind`] resource applies where a body has none.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodyWind {
+    /// Mean air velocity (m/s).
+    pub velocity: Vec3,
+    /// Breeze amplitude (m/s).
+    pub gust: f32,
+    /// Breeze base frequency (Hz).
+    pub frequency: f32,
+    /// Air-drag coefficient per particle (N·s/m).
+    pub coefficient: f32,
+    /// Seed of the breeze.
+    pub seed: u64,
+    /// On or off (the W key of the examples toggles it).
+    pub enabled: bool,
+}
+
+impl Default for SoftBodyWind {
+    fn default() -> Self {
+        Self::from(crate::core::forces::Wind::default())
+    }
+}
+
+impl From<crate::core::forces::Wind> for SoftBodyWind {
+    fn from(w: crate::core::forces::Wind) -> Self {
+        Self {
+            velocity: Vec3::from_array(w.velocity.map(|c| c as f32)),
+            gust: w.gust as f32,
+            frequency: w.frequency as f32,
+            coefficient: w.coefficient as f32,
+            seed: w.seed,
+            enabled: w.enabled,
+        }
+    }
+}
+
+impl From<SoftBodyWind> for crate::core::forces::Wind {
+    fn from(w: SoftBodyWind) -> Self {
+        Self {
+            velocity: w.velocity.to_array().map(|c| c as f64),
+            gust: w.gust as f64,
+            frequency: w.frequency as f64,
+            coefficient: w.coefficient as f64,
+            seed: w.seed,
+            enabled: w.enabled,
+        }
+    }
+}
+
+/// Wind for every body without its own [`SoftBodyWind`] (`None`: no wind).
+#[derive(Resource, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Resource, Default, Debug)]
+pub struct GlobalWind(pub Option<SoftBodyWind>);
+
+/// A parry3d shape (reflected as an opaque value).
+#[derive(Clone, Deref)]
+pub struct ColliderShape(pub SharedShape);
+
+impl Default for ColliderShape {
+    fn default() -> Self {
+        Self(SharedShape::ball(0.5))
+    }
+}
+
+impl std::fmt::Debug for ColliderShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ColliderShape({:?})", self.0.shape_type())
+    }
+}
+
+/// Something particles collide with: any parry3d shape at the entity's `GlobalTransform`,
+/// static or moving (its velocity is taken from its transform change between fixed steps).
+/// Every substep, a particle closer than `thickness` is projected to the surface, its normal
+/// velocity relative to the collider reflected with `restitution` and its tangential relative
+/// velocity reduced by Coulomb friction.
+#[derive(Component, Reflect, Clone, Debug)]
+#[reflect(Component, Default, Debug)]
+#[require(Transform, crate::ecs::plugin::ColliderTrack)]
+pub struct SoftBodyCollider {
+    /// The shape (ball, half-space, cuboid, capsule, trimesh...).
+    #[reflect(ignore)]
+    pub shape: ColliderShape,
+    /// Coulomb friction coefficient.
+    pub friction: f32,
+    /// Restitution of the normal relative velocity.
+    pub restitution: f32,
+    /// Contact distance (m): particles closer than this are pushed out to it.
+    pub thickness: f32,
+    /// Normal speeds below this do not bounce (m/s).
+    pub bounce_threshold: f32,
+}
+
+impl Default for SoftBodyCollider {
+    fn default() -> Self {
+        Self {
+            shape: ColliderShape::default(),
+            friction: 0.3,
+            restitution: 0.0,
+            thickness: 0.01,
+            bounce_threshold: 0.05,
+        }
+    }
+}
+
+impl SoftBodyCollider {
+    /// A collider of `shape` with the default material.
+    pub fn new(shape: SharedShape) -> Self {
+        Self {
+            shape: ColliderShape(shape),
+            ..Default::default()
+        }
+    }
+
+    /// A ball of `radius`.
+    pub fn ball(radius: f32) -> Self {
+        Self::new(SharedShape::ball(radius))
+    }
+
+    /// A ground plane through the entity's origin with normal `+Y` (rotate the entity to tilt
+    /// it).
+    pub fn ground() -> Self {
+        Self::new(SharedShape::halfspace(parry3d::math::Vector::Y))
+    }
+
+    /// The same collider with another material.
+    pub fn with_material(mut self, friction: f32, restitution: f32, thickness: f32) -> Self {
+        self.friction = friction;
+        self.restitution = restitution;
+        self.thickness = thickness;
+        self
+    }
+}
+
+/// Moves an entity's `Transform` along a closed-form path each fixed step (scene colliders and
+/// the prescribed endpoints of scene files).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Debug)]
+pub struct ScriptedMotion(pub Motion);
+
+/// Sent when a body diverges: it stops, keeps its last good state, and the others go on.
+#[derive(Message, Clone, Debug)]
+pub struct SoftBodyDiverged {
+    /// The body's root entity.
+    pub body: Entity,
+    /// What happened (frame, time, method, cause).
+    pub divergence: Divergence,
+    /// The message with a suggested fix.
+    pub message: String,
+}
+
+/// Sent when a body is left out of stepping because of invalid input.
+#[derive(Message, Clone, Debug)]
+pub struct SoftBodyInvalid {
+    /// The body's root entity.
+    pub body: Entity,
+    /// What is wrong, naming the entity.
+    pub message: String,
+}

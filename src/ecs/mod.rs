@@ -1,0 +1,12 @@
+//! The Bevy face of the core (feature `plugin`): components that are the layout,
+//! [`SoftBodyPlugin`] that gathers them into the core's packed model, steps every body with the
+//! core driver and writes the state back, and [`SpawnSoftBody`] to spawn whole bodies from the
+//! core's scene builders or JSON files.
+
+mod components;
+pub(crate) mod plugin;
+mod spawn;
+
+pub use components::*;
+pub use plugin::{BodySim, SoftBodyPlugin, SoftBodySet};
+pub use spawn::SpawnSoftBody;

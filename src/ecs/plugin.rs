@@ -1,0 +1,588 @@
+//! [`SoftBodyPlugin`]: gathers each body's components into the core's packed model (only when
+//! something changed), advances every body in parallel with the core driver — substeps that
+//! land exactly on the fixed frame's end, collisions every substep, the divergence guard — and
+//! writes the state back to the components.
+
+use super::components::*;
+use crate::core::collide::{Collider, ContactMaterial};
+use crate::core::driver::{Divergence, DriverConfig, Simulation, StepPolicy};
+use crate::core::motion::Motion;
+use crate::core::ode::{OdeState, ParticleState};
+use crate::core::particles::{ModelError, ParticleModel};
+use crate::math::{Scalar, from_f32, to_f32};
+use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
+use bevy::prelude::*;
+use std::collections::HashMap;
+
+/// Soft-body physics. Runs in `FixedUpdate` by default ([`SoftBodyPlugin::new`] picks another
+/// schedule), in the chained sets [`SoftBodySet`]; meshes and debug drawing follow in
+/// `PostUpdate`, once per frame.
+#[derive(Debug, Clone)]
+pub struct SoftBodyPlugin {
+    schedule: InternedScheduleLabel,
+}
+
+impl Default for SoftBodyPlugin {
+    fn default() -> Self {
+        Self::new(FixedUpdate)
+    }
+}
+
+impl SoftBodyPlugin {
+    /// Runs the simulation in `schedule` (the frame length is still `Time<Fixed>`'s timestep).
+    pub fn new(schedule: impl ScheduleLabel) -> Self {
+        Self {
+            schedule: schedule.intern(),
+        }
+    }
+}
+
+/// The phases of a soft-body step, chained in this order; order your systems against them.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SoftBodySet {
+    /// Topology and parameter changes → packed core model (rebuilt only when something
+    /// changed); teleports, pin targets and collider poses applied.
+    Prepare,
+    /// Every body advanced by one fixed frame in substeps (forces, integration, collisions),
+    /// bodies in parallel.
+    Step,
+    /// Core state → [`Particle`] components (and their `Transform`s), messages sent.
+    Writeback,
+}
+
+impl Plugin for SoftBodyPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<SoftBody>()
+            .register_type::<SoftBodyStatus>()
+            .register_type::<Particle>()
+            .register_type::<ParticleOf>()
+            .register_type::<BodyParticles>()
+            .register_type::<Spring>()
+            .register_type::<SpringOf>()
+            .register_type::<BodySprings>()
+            .register_type::<Pinned>()
+            .register_type::<ExternalForce>()
+            .register_type::<SoftBodyWind>()
+            .register_type::<GlobalWind>()
+            .register_type::<SoftBodyCollider>()
+            .register_type::<ScriptedMotion>()
+            .register_type::<crate::render::SoftBodySurface>()
+            .register_type::<crate::render::SoftBodyDebug>()
+            .init_resource::<GlobalWind>()
+            .init_resource::<crate::render::SoftBodyDebug>()
+            .add_message::<SoftBodyDiverged>()
+            .add_message::<SoftBodyInvalid>()
+            .configure_sets(
+                self.schedule,
+                (
+                    SoftBodySet::Prepare,
+                    SoftBodySet::Step,
+                    SoftBodySet::Writeback,
+                )
+                    .chain(),
+            )
+            .add_systems(
+                self.schedule,
+                (
+                    (scripted_motion, prepare)
+                        .chain()
+                        .in_set(SoftBodySet::Prepare),
+                    step.in_set(SoftBodySet::Step),
+                    writeback.in_set(SoftBodySet::Writeback),
+                ),
+            );
+        crate::render::build(app);
+    }
+
+    fn finish(&self, app: &mut App) {
+        crate::render::finish(app);
+    }
+}
+
+/// The packed core simulation of one body (internal).
+#[derive(Component, Default)]
+pub struct BodySim {
+    pub(crate) sim: Option<Simulation<ParticleState, ParticleModel>>,
+    /// Particle entity of each packed index.
+    pub(crate) particles: Vec<Entity>,
+    /// Spring entities in the body's relationship order (the packed list may skip some).
+    pub(crate) springs: Vec<Entity>,
+    /// Positions and velocities as last written to the components (to tell user edits apart).
+    written: Vec<(Vec3, Vec3)>,
+    /// Particles following a target: index, target, offset, target's last position.
+    follow: Vec<(u32, Entity, Vec3, Vec3)>,
+    /// Pinned-in-place particle indices (editing their position moves the pin).
+    fixed_pins: Vec<u32>,
+    problem: Option<String>,
+    diverged: Option<Divergence>,
+    report: bool,
+    frame_dt: f64,
+}
+
+impl BodySim {
+    /// The core simulation, once built.
+    pub fn simulation(&self) -> Option<&Simulation<ParticleState, ParticleModel>> {
+        self.sim.as_ref()
+    }
+
+    /// The particle entity of each packed index.
+    pub fn particle_entities(&self) -> &[Entity] {
+        &self.particles
+    }
+}
+
+/// A collider's pose at the previous fixed step (internal: its velocity comes from the
+/// change).
+#[derive(Component, Default)]
+pub struct ColliderTrack {
+    prev: Option<(Vec3, Quat)>,
+}
+
+fn scripted_motion(
+    time: Res<Time>,
+    mut q: Query<(&ScriptedMotion, &mut Transform, &mut GlobalTransform), Without<ChildOf>>,
+) {
+    let t = time.elapsed_secs_f64() as Scalar;
+    for (m, mut tf, mut gt) in &mut q {
+        tf.translation = to_f32(m.0.position(t));
+        // Top-level entity: its global transform is its transform; set it now so this fixed
+        // step sees the new pose (propagation runs later, in PostUpdate).
+        *gt = GlobalTransform::from(*tf);
+    }
+}
+
+fn v3(v: Vec3) -> [f64; 3] {
+    v.to_array().map(|c| c as f64)
+}
+
+/// A linear path from `from` (at `t0`) to `to` (at `t0 + dt`).
+fn linear(from: Vec3, to: Vec3, t0: Scalar, dt: f64) -> Motion {
+    Motion::Linear {
+        start: v3(from),
+        velocity: v3((to - from) / dt as f32),
+        t0: t0 as f64,
+    }
+}
+
+type ParticleItem<'a> = (
+    Ref<'a, Particle>,
+    Option<Ref<'a, Pinned>>,
+    Option<Ref<'a, ExternalForce>>,
+);
+
+/// What a rebuild produced.
+struct Built {
+    sim: Simulation<ParticleState, ParticleModel>,
+    particles: Vec<Entity>,
+    follow: Vec<(u32, Entity, Vec3, Vec3)>,
+    fixed_pins: Vec<u32>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_body(
+    body_e: Entity,
+    body: &SoftBody,
+    wind: Option<SoftBodyWind>,
+    list: &[Entity],
+    spring_list: &[Entity],
+    particles: &Query<ParticleItem>,
+    springs: &Query<Ref<Spring>>,
+    targets: &Query<&GlobalTransform>,
+    frame_dt: f64,
+) -> Result<Built, String> {
+    let mut ents = Vec::with_capacity(list.len());
+    let mut index = HashMap::with_capacity(list.len());
+    for &e in list {
+        if particles.contains(e) {
+            index.insert(e, ents.len() as u32);
+            ents.push(e);
+        }
+    }
+    if ents.is_empty() {
+        return Err(format!("soft body {body_e} has no particles"));
+    }
+    let mut state = ParticleState::zeros(ents.len());
+    let mut masses = Vec::with_capacity(ents.len());
+    for (i, &e) in ents.iter().enumerate() {
+        let (p, _, _) = particles.get(e).expect("checked above");
+        if !p.position.is_finite() || !p.velocity.is_finite() {
+            return Err(format!(
+                "particle {e}: position {} or velocity {} is not finite",
+                p.position, p.velocity
+            ));
+        }
+        state.x[i] = from_f32(p.position);
+        state.v[i] = from_f32(p.velocity);
+        masses.push(p.mass as Scalar);
+    }
+    let mut model = ParticleModel::new(masses);
+    let (mut follow, mut fixed_pins) = (vec![], vec![]);
+    for (i, &e) in ents.iter().enumerate() {
+        let (p, pin, force) = particles.get(e).expect("checked above");
+        if let Some(pin) = pin {
+            match pin.target {
+                None => {
+                    model.pin(i, state.x[i]);
+                    fixed_pins.push(i as u32);
+                }
+                Some(t) => match targets.get(t) {
+                    Ok(gt) => {
+                        let at = gt.transform_point(pin.offset);
+                        model.prescribe(i, Motion::Fixed { position: v3(at) });
+                        state.x[i] = from_f32(at);
+                        follow.push((i as u32, t, pin.offset, at));
+                    }
+                    Err(_) => {
+                        warn!(
+                            "particle {e}: pin target {t} has no GlobalTransform; pinned in place"
+                        );
+                        model.pin(i, from_f32(p.position));
+                        fixed_pins.push(i as u32);
+                    }
+                },
+            }
+        }
+        if let Some(f) = force {
+            model.set_external_force(i, from_f32(f.0));
+        }
+    }
+    for &se in spring_list {
+        let Ok(s) = springs.get(se) else {
+            continue;
+        };
+        match (index.get(&s.a), index.get(&s.b)) {
+            (Some(&a), Some(&b)) => model.springs.push(
+                a as usize,
+                b as usize,
+                s.rest_length as Scalar,
+                s.stiffness as Scalar,
+                s.damping as Scalar,
+                s.law,
+            ),
+            _ => warn!(
+                "soft body {body_e}: spring {se} joins {} and {}, which are not both particles of this body; the spring is left out",
+                s.a, s.b
+            ),
+        }
+    }
+    model.gravity = from_f32(body.gravity.unwrap_or(Vec3::new(0.0, -9.81, 0.0)));
+    model.drag = body.drag as Scalar;
+    model.set_wind(wind.map(Into::into));
+    if let Err(e) = model.validate() {
+        // Name the entity behind the packed index.
+        let spring_entity = |k: usize| {
+            spring_list
+                .iter()
+                .filter(|se| {
+                    springs
+                        .get(**se)
+                        .is_ok_and(|s| index.contains_key(&s.a) && index.contains_key(&s.b))
+                })
+                .nth(k)
+                .copied()
+        };
+        return Err(match e {
+            ModelError::BadMass { particle, mass } => format!(
+                "particle {}: mass {mass} must be positive and finite unless the particle is pinned",
+                ents[particle]
+            ),
+            ModelError::BadSpring { spring, reason } => match spring_entity(spring) {
+                Some(se) => format!("spring {se}: {reason}"),
+                None => format!("soft body {body_e}: spring {spring}: {reason}"),
+            },
+            other => format!("soft body {body_e}: {other}"),
+        });
+    }
+    match body.step {
+        StepPolicy::Fixed { h } if !(h.is_finite() && h > 0.0) => {
+            return Err(format!(
+                "soft body {body_e}: step h = {h} must be a positive number"
+            ));
+        }
+        StepPolicy::Cfl { number, max, .. }
+            if !(number.is_finite() && number > 0.0 && max.is_finite() && max > 0.0) =>
+        {
+            return Err(format!(
+                "soft body {body_e}: CFL number {number} and cap {max} must be positive numbers"
+            ));
+        }
+        _ => {}
+    }
+    if let Some(g) = body.energy_guard
+        && !(g.is_finite() && g > 0.0)
+    {
+        return Err(format!(
+            "soft body {body_e}: energy guard {g} must be a positive number"
+        ));
+    }
+    let config = DriverConfig {
+        integrator: body.integrator,
+        policy: body.step,
+        frame_dt,
+        energy_guard: body.energy_guard.map(|g| g as f64),
+        ..Default::default()
+    };
+    Ok(Built {
+        sim: Simulation::new(model, state, config),
+        particles: ents,
+        follow,
+        fixed_pins,
+    })
+}
+
+/// Moves the particles that follow a target along the target's path over the coming frame.
+fn update_follow(bs: &mut BodySim, targets: &Query<&GlobalTransform>) {
+    let dt = bs.frame_dt;
+    let Some(sim) = bs.sim.as_mut() else { return };
+    let t0 = sim.time;
+    for (i, target, offset, last) in &mut bs.follow {
+        let to = match targets.get(*target) {
+            Ok(gt) => gt.transform_point(*offset),
+            Err(_) => *last, // target gone: stay where it was
+        };
+        sim.system.prescribe(*i as usize, linear(*last, to, t0, dt));
+        *last = to;
+    }
+}
+
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn prepare(
+    fixed: Res<Time<Fixed>>,
+    global_wind: Res<GlobalWind>,
+    mut bodies: Query<(
+        Entity,
+        Ref<SoftBody>,
+        &mut BodySim,
+        &mut SoftBodyStatus,
+        Option<&BodyParticles>,
+        Option<&BodySprings>,
+        Option<Ref<SoftBodyWind>>,
+    )>,
+    particles: Query<ParticleItem>,
+    springs: Query<Ref<Spring>>,
+    targets: Query<&GlobalTransform>,
+    colliders: Query<(&SoftBodyCollider, &GlobalTransform, &ColliderTrack)>,
+    mut removed_particles: RemovedComponents<Particle>,
+    mut removed_springs: RemovedComponents<Spring>,
+    mut removed_pins: RemovedComponents<Pinned>,
+    mut removed_forces: RemovedComponents<ExternalForce>,
+    mut removed_winds: RemovedComponents<SoftBodyWind>,
+    mut invalid: MessageWriter<SoftBodyInvalid>,
+) {
+    let frame_dt = fixed.timestep().as_secs_f64();
+    // Removals cannot be traced to their body once despawned: every body re-checks.
+    let removed = removed_particles.read().count()
+        + removed_springs.read().count()
+        + removed_pins.read().count()
+        + removed_forces.read().count()
+        + removed_winds.read().count()
+        > 0;
+    let no_list: &[Entity] = &[];
+    for (body_e, body, mut bs, mut status, plist, slist, wind) in &mut bodies {
+        let plist = plist.map_or(no_list, |p| p.entities());
+        let slist = slist.map_or(no_list, |s| s.entities());
+        let bs = &mut *bs;
+        let mut dirty = bs.sim.is_none() && bs.problem.is_none()
+            || body.is_changed()
+            || removed
+            || global_wind.is_changed()
+            || wind.as_ref().is_some_and(|w| w.is_changed())
+            || bs.frame_dt != frame_dt
+            || bs.springs.as_slice() != slist
+            || bs.particles.len() != plist.len()
+            || bs.particles.as_slice() != plist;
+        if !dirty {
+            dirty = slist
+                .iter()
+                .any(|e| springs.get(*e).is_ok_and(|s| s.is_changed()));
+        }
+        if !dirty && bs.problem.is_some() {
+            // Left out for bad input: retry when any of its particles is edited.
+            dirty = plist.iter().any(|e| {
+                particles.get(*e).is_ok_and(|(p, pin, f)| {
+                    p.is_changed()
+                        || pin.is_some_and(|p| p.is_changed())
+                        || f.is_some_and(|f| f.is_changed())
+                })
+            });
+        }
+        if !dirty && let Some(sim) = bs.sim.as_mut() {
+            // Per particle: pins, forces and masses changed → rebuild; position or velocity
+            // edited (not by our writeback) → teleport.
+            let masses = sim.system.mass();
+            for (i, &e) in bs.particles.iter().enumerate() {
+                let Ok((p, pin, force)) = particles.get(e) else {
+                    dirty = true;
+                    break;
+                };
+                if pin.is_some_and(|p| p.is_changed())
+                    || force.is_some_and(|f| f.is_changed())
+                    || p.mass as Scalar != masses[i]
+                {
+                    dirty = true;
+                    break;
+                }
+                let (wx, wv) = bs.written[i];
+                if p.position != wx || p.velocity != wv {
+                    if bs.fixed_pins.contains(&(i as u32)) {
+                        dirty = true;
+                        break;
+                    }
+                    if p.position.is_finite() && p.velocity.is_finite() {
+                        sim.state.x[i] = from_f32(p.position);
+                        sim.state.v[i] = from_f32(p.velocity);
+                        bs.written[i] = (p.position, p.velocity);
+                    } else {
+                        warn!("particle {e}: non-finite position or velocity ignored (kept {wx})");
+                    }
+                }
+            }
+        }
+        if dirty {
+            bs.diverged = None;
+            bs.report = false;
+            bs.frame_dt = frame_dt;
+            bs.springs = slist.to_vec();
+            let wind = wind.map(|w| *w).or(global_wind.0);
+            match build_body(
+                body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt,
+            ) {
+                Ok(b) => {
+                    bs.written = b
+                        .particles
+                        .iter()
+                        .map(|e| {
+                            let (p, _, _) = particles.get(*e).expect("built from these");
+                            (p.position, p.velocity)
+                        })
+                        .collect();
+                    status.particles = b.particles.len() as u32;
+                    status.springs = b.sim.system.springs.len() as u32;
+                    bs.sim = Some(b.sim);
+                    bs.particles = b.particles;
+                    bs.follow = b.follow;
+                    bs.fixed_pins = b.fixed_pins;
+                    bs.problem = None;
+                    status.state = BodyState::Running;
+                }
+                Err(msg) => {
+                    warn!("{msg}; the body is left out of stepping");
+                    invalid.write(SoftBodyInvalid {
+                        body: body_e,
+                        message: msg.clone(),
+                    });
+                    bs.sim = None;
+                    bs.particles = plist.to_vec();
+                    bs.problem = Some(msg.clone());
+                    status.state = BodyState::Invalid(msg);
+                }
+            }
+        } else {
+            update_follow(bs, &targets);
+        }
+        // Colliders: each moves linearly from its last pose to its current one over the
+        // frame (its velocity is the transform's change over the fixed step).
+        if let Some(sim) = bs.sim.as_mut() {
+            sim.system.colliders.clear();
+            let t0 = sim.time;
+            for (c, gt, track) in &colliders {
+                let (_, rot, pos) = gt.to_scale_rotation_translation();
+                let from = track.prev.map_or(pos, |p| p.0);
+                sim.system.colliders.push(Collider::new(
+                    c.shape.0.clone(),
+                    linear(from, pos, t0, frame_dt),
+                    rot,
+                    ContactMaterial {
+                        friction: c.friction as f64,
+                        restitution: c.restitution as f64,
+                        thickness: c.thickness as f64,
+                        bounce_threshold: c.bounce_threshold as f64,
+                    },
+                ));
+            }
+        }
+    }
+}
+
+fn step(mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>) {
+    bodies
+        .par_iter_mut()
+        .for_each(|(body, mut bs, mut status)| {
+            let bs = &mut *bs;
+            let Some(sim) = bs.sim.as_mut() else { return };
+            if bs.diverged.is_some() {
+                return;
+            }
+            if body.paused {
+                status.state = BodyState::Paused;
+                return;
+            }
+            let start = std::time::Instant::now();
+            match sim.advance_frame() {
+                Ok(rep) => {
+                    // Followers end the frame exactly on their target (the linear path's end,
+                    // recomputed in floating point, can be off by an ulp).
+                    for (i, _, _, at) in &bs.follow {
+                        sim.state.x[*i as usize] = from_f32(*at);
+                    }
+                    status.state = BodyState::Running;
+                    status.substeps = rep.substeps;
+                }
+                Err(d) => {
+                    status.state = BodyState::Diverged(d.to_string());
+                    bs.diverged = Some(d);
+                    bs.report = true;
+                }
+            }
+            status.time = sim.time as f32;
+            status.step_ms = start.elapsed().as_secs_f32() * 1e3;
+        });
+}
+
+fn writeback(
+    mut bodies: Query<(Entity, &mut BodySim)>,
+    mut particles: Query<(&mut Particle, Option<&mut Transform>)>,
+    mut colliders: Query<(&GlobalTransform, &mut ColliderTrack)>,
+    mut diverged: MessageWriter<SoftBodyDiverged>,
+) {
+    for (body_e, mut bs) in &mut bodies {
+        let bs = &mut *bs;
+        if bs.report
+            && let Some(d) = &bs.diverged
+        {
+            bs.report = false;
+            let message = format!("soft body {body_e}: {d}");
+            warn!("{message}");
+            diverged.write(SoftBodyDiverged {
+                body: body_e,
+                divergence: d.clone(),
+                message,
+            });
+        }
+        let Some(sim) = bs.sim.as_ref() else { continue };
+        // The driver restores the last good state on divergence; never write anything else.
+        if !sim.state.is_finite() {
+            continue;
+        }
+        for (i, &e) in bs.particles.iter().enumerate() {
+            let Ok((mut p, tf)) = particles.get_mut(e) else {
+                continue;
+            };
+            let (x, v) = (to_f32(sim.state.x[i]), to_f32(sim.state.v[i]));
+            if p.position != x || p.velocity != v {
+                p.position = x;
+                p.velocity = v;
+            }
+            bs.written[i] = (x, v);
+            if let Some(mut tf) = tf
+                && tf.translation != x
+            {
+                tf.translation = x;
+            }
+        }
+    }
+    for (gt, mut track) in &mut colliders {
+        let (_, rot, pos) = gt.to_scale_rotation_translation();
+        track.prev = Some((pos, rot));
+    }
+}

@@ -1,0 +1,184 @@
+//! Drawing soft bodies: a body with a [`SoftBodySurface`] gets a triangle mesh whose vertices
+//! are its particles (positions written once per frame after the fixed step, smooth
+//! area-weighted normals recomputed in place, UVs kept, double-sided material); bodies without
+//! a surface (chains, wires, jelly lattices) and, in wireframe mode, every body are drawn with
+//! gizmos: springs as lines, particles as small spheres.
+
+use crate::core::ode::OdeState;
+use crate::ecs::plugin::BodySim;
+use crate::math::to_f32;
+use bevy::asset::RenderAssetUsages;
+use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
+use bevy::prelude::*;
+
+/// Triangles over a body's particles (indices into its particle list, counter-clockwise), with
+/// optional per-particle texture coordinates: the body is drawn as a deforming mesh.
+#[derive(Component, Reflect, Clone, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodySurface {
+    /// Triangles.
+    pub triangles: Vec<[u32; 3]>,
+    /// Texture coordinates, one per particle (empty: none).
+    pub uvs: Vec<[f32; 2]>,
+    /// Colour of the default material (used when the body has no `MeshMaterial3d`).
+    pub color: Color,
+}
+
+impl Default for SoftBodySurface {
+    fn default() -> Self {
+        Self {
+            triangles: vec![],
+            uvs: vec![],
+            color: Color::srgb(0.85, 0.25, 0.22),
+        }
+    }
+}
+
+/// Debug drawing.
+#[derive(Resource, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Resource, Default, Debug)]
+pub struct SoftBodyDebug {
+    /// Draw every body's springs as lines, surfaces included.
+    pub wireframe: bool,
+    /// Radius of the particle spheres drawn for bodies without a surface (m).
+    pub particle_radius: f32,
+}
+
+impl Default for SoftBodyDebug {
+    fn default() -> Self {
+        Self {
+            wireframe: false,
+            particle_radius: 0.02,
+        }
+    }
+}
+
+pub(crate) fn build(app: &mut App) {
+    app.add_systems(PostUpdate, sync_surfaces);
+}
+
+/// Adds the gizmo drawing when the app has gizmos (call after `DefaultPlugins`).
+pub(crate) fn finish(app: &mut App) {
+    if app.world().contains_resource::<GizmoConfigStore>() {
+        app.add_systems(PostUpdate, draw_gizmos);
+    }
+}
+
+/// Area-weighted vertex normals of a triangle mesh, written into `normals` (one per vertex,
+/// unit length; `+Y` where no triangle with area touches a vertex).
+pub fn smooth_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], normals: &mut [[f32; 3]]) {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| Vec3::from_array(positions[i as usize]));
+        // The cross product's length is twice the area: larger triangles weigh more.
+        let n = (b - a).cross(c - a);
+        for &i in t {
+            acc[i as usize] += n;
+        }
+    }
+    for (out, n) in normals.iter_mut().zip(acc) {
+        *out = n.try_normalize().unwrap_or(Vec3::Y).to_array();
+    }
+}
+
+type SurfaceItem<'a> = (
+    Entity,
+    &'a SoftBodySurface,
+    &'a BodySim,
+    Option<&'a Mesh3d>,
+    Has<MeshMaterial3d<StandardMaterial>>,
+);
+
+fn sync_surfaces(
+    mut commands: Commands,
+    meshes: Option<ResMut<Assets<Mesh>>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+    q: Query<SurfaceItem>,
+) {
+    let Some(mut meshes) = meshes else { return };
+    let mut materials = materials;
+    for (e, surface, bs, mesh3d, has_material) in &q {
+        let Some(sim) = bs.simulation() else { continue };
+        let n = sim.state.len();
+        if !sim.state.is_finite() || surface.triangles.iter().flatten().any(|&i| i as usize >= n) {
+            continue;
+        }
+        let positions: Vec<[f32; 3]> = sim.state.x.iter().map(|x| to_f32(*x).to_array()).collect();
+        if let Some(m) = mesh3d {
+            if let Some(mut mesh) = meshes.get_mut(&m.0) {
+                if let Some(VertexAttributeValues::Float32x3(p)) =
+                    mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+                    && p.len() == n
+                {
+                    p.copy_from_slice(&positions);
+                }
+                if let Some(VertexAttributeValues::Float32x3(nrm)) =
+                    mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
+                    && nrm.len() == n
+                {
+                    smooth_normals(&positions, &surface.triangles, nrm);
+                }
+            }
+            continue;
+        }
+        let mut mesh = Mesh::new(
+            PrimitiveTopology::TriangleList,
+            RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+        );
+        let mut normals = vec![[0.0; 3]; n];
+        smooth_normals(&positions, &surface.triangles, &mut normals);
+        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+        mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
+        if surface.uvs.len() == n {
+            mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, surface.uvs.clone());
+        }
+        mesh.insert_indices(Indices::U32(
+            surface.triangles.iter().flatten().copied().collect(),
+        ));
+        let handle = meshes.add(mesh);
+        let mut ec = commands.entity(e);
+        ec.insert(Mesh3d(handle));
+        if !has_material && let Some(materials) = materials.as_mut() {
+            ec.insert(MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: surface.color,
+                perceptual_roughness: 0.8,
+                double_sided: true,
+                cull_mode: None,
+                ..default()
+            })));
+        }
+    }
+}
+
+fn draw_gizmos(
+    debug: Res<SoftBodyDebug>,
+    mut gizmos: Gizmos,
+    q: Query<(&BodySim, Has<SoftBodySurface>)>,
+) {
+    for (bs, has_surface) in &q {
+        let Some(sim) = bs.simulation() else { continue };
+        if has_surface && !debug.wireframe {
+            continue;
+        }
+        let x = &sim.state.x;
+        if !sim.state.is_finite() {
+            continue;
+        }
+        for s in sim.system.springs.as_slice() {
+            gizmos.line(
+                to_f32(x[s.i as usize]),
+                to_f32(x[s.j as usize]),
+                Color::srgb(0.9, 0.9, 0.5),
+            );
+        }
+        if !has_surface {
+            for p in x {
+                gizmos.sphere(
+                    Isometry3d::from_translation(to_f32(*p)),
+                    debug.particle_radius,
+                    Color::srgb(0.3, 0.7, 1.0),
+                );
+            }
+        }
+    }
+}

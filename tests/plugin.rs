@@ -1,0 +1,422 @@
+//! The plugin in headless Apps (`MinimalPlugins`, one fixed step of 1/64 s per update): it
+//! steps exactly as the core driver, holds and moves pins, collides, survives despawns, keeps
+//! meshes equal to particles, and leaves bodies with bad input out with a message naming the
+//! culprit.
+#![cfg(feature = "plugin")]
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_soft_body::core::build;
+use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
+use bevy_soft_body::core::integrate::IntegratorKind;
+use bevy_soft_body::core::motion::Motion;
+use bevy_soft_body::core::scene::Scene;
+use bevy_soft_body::ecs::*;
+use bevy_soft_body::math::to_f32;
+use bevy_soft_body::render::SoftBodySurface;
+
+/// 1/64 s: exactly representable, so the plugin's frame (from `Time<Fixed>`'s `Duration`) and
+/// the core driver's are the same number.
+const FRAME: f64 = 1.0 / 64.0;
+
+fn app() -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+        .insert_resource(Time::<Fixed>::from_seconds(FRAME))
+        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+    app.update(); // the first update has zero delta: no fixed step
+    app
+}
+
+fn spawn(app: &mut App, scene: &Scene, body: SoftBody) -> Entity {
+    let scene = scene.clone();
+    app.world_mut()
+        .run_system_once(move |mut c: Commands| c.spawn_soft_body(&scene, body.clone()).unwrap())
+        .unwrap()
+}
+
+fn frames(app: &App, body: Entity) -> u64 {
+    app.world()
+        .get::<BodySim>(body)
+        .and_then(|b| b.simulation())
+        .map_or(0, |s| s.frame)
+}
+
+fn status(app: &App, body: Entity) -> SoftBodyStatus {
+    app.world().get::<SoftBodyStatus>(body).unwrap().clone()
+}
+
+fn particles_of(app: &App, body: Entity) -> Vec<Vec3> {
+    let w = app.world();
+    w.get::<BodyParticles>(body)
+        .unwrap()
+        .entities()
+        .iter()
+        .map(|e| w.get::<Particle>(*e).unwrap().position)
+        .collect()
+}
+
+/// The default pendulum chain with dyadic parameters (mass 1/8 kg, k = 256 N/m, drag 1/64,
+/// g = 9.8125), so the plugin's f32 components carry them exactly in either precision.
+fn chain_scene() -> Scene {
+    let mut s = build::chain(&build::ChainParams {
+        particles: 5,
+        mass: 0.125,
+        stiffness: 256.0,
+        drag: 0.015625,
+        ..Default::default()
+    })
+    .unwrap();
+    s.gravity = [0.0, -9.8125, 0.0];
+    s
+}
+
+use bevy::ecs::system::RunSystemOnce;
+
+#[test]
+fn plugin_steps_a_pendulum_bitwise_like_the_core_driver() {
+    let scene = chain_scene();
+    let h = 1.0 / 512.0;
+    let body = SoftBody {
+        integrator: IntegratorKind::Rk4,
+        step: StepPolicy::Fixed { h },
+        ..Default::default()
+    };
+    let mut app = app();
+    let e = spawn(&mut app, &scene, body);
+    for _ in 0..128 {
+        app.update();
+    }
+    assert_eq!(frames(&app, e), 128, "one fixed step per update");
+    let (model, state) = scene.build().unwrap();
+    let mut core = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::Rk4,
+            policy: StepPolicy::Fixed { h },
+            frame_dt: FRAME,
+            ..Default::default()
+        },
+    );
+    core.run(128, |_, _| {}).unwrap();
+    let bs = app.world().get::<BodySim>(e).unwrap();
+    let ecs = bs.simulation().unwrap();
+    assert_eq!(ecs.time, core.time);
+    assert_eq!(ecs.state.x, core.state.x, "positions differ");
+    assert_eq!(ecs.state.v, core.state.v, "velocities differ");
+    let expected: Vec<Vec3> = core.state.x.iter().map(|x| to_f32(*x)).collect();
+    assert_eq!(
+        particles_of(&app, e),
+        expected,
+        "components differ from the state"
+    );
+    assert!(
+        expected[4].y < -0.3,
+        "the chain swung down: {:?}",
+        expected[4]
+    );
+}
+
+#[test]
+fn pinned_particles_hold_and_follow_their_targets_exactly() {
+    let mut app = app();
+    let scene = chain_scene();
+    let e = spawn(&mut app, &scene, SoftBody::default());
+    app.update();
+    let p0 = particles_of(&app, e)[0];
+    // A second chain whose first particle follows a target moving on a circle.
+    let target = app
+        .world_mut()
+        .spawn((
+            Transform::default(),
+            ScriptedMotion(Motion::Circle {
+                center: [0.0, 1.0, 0.0],
+                radius: 0.5,
+                omega: 3.0,
+                phase: 0.0,
+                a: [1.0, 0.0, 0.0],
+                b: [0.0, 0.0, 1.0],
+            }),
+        ))
+        .id();
+    let mut s2 = chain_scene();
+    s2.particles[0].pinned = false;
+    let e2 = spawn(&mut app, &s2, SoftBody::default());
+    let first = app.world().get::<BodyParticles>(e2).unwrap().entities()[0];
+    let offset = Vec3::new(0.0, -0.1, 0.0);
+    app.world_mut()
+        .entity_mut(first)
+        .insert(Pinned::to(target, offset));
+    for _ in 0..200 {
+        app.update();
+        assert_eq!(particles_of(&app, e)[0], p0, "a pinned particle moved");
+        let gt = app.world().get::<GlobalTransform>(target).unwrap();
+        let want = gt.transform_point(offset);
+        let got = app.world().get::<Particle>(first).unwrap().position;
+        assert_eq!(got, want, "the follower is off its target");
+    }
+    let xs = particles_of(&app, e2);
+    assert!(xs.iter().all(|x| x.is_finite()));
+    assert_eq!(status(&app, e2).state, BodyState::Running);
+}
+
+#[test]
+fn cloth_never_sinks_into_the_swinging_sphere() {
+    // The cloth_sphere scene (16×16 here, RK4 at h = 0.0025 as the example): after every fixed
+    // step every particle is outside the sphere by at least its contact thickness, less 1 mm.
+    let p = build::ClothParams::default();
+    let scene = build::cloth_sphere(&p, 0.25, 0.6, 4.0).unwrap();
+    let c = &scene.colliders[0];
+    let radius = match c.shape {
+        bevy_soft_body::core::collide::ShapeDesc::Sphere { radius } => radius as f32,
+        _ => unreachable!(),
+    };
+    let thickness = c.material.thickness as f32;
+    let mut app = app();
+    let e = spawn(
+        &mut app,
+        &scene,
+        SoftBody {
+            integrator: IntegratorKind::Rk4,
+            step: StepPolicy::Fixed { h: 0.0025 },
+            ..Default::default()
+        },
+    );
+    let mut q = app
+        .world_mut()
+        .query_filtered::<&GlobalTransform, With<SoftBodyCollider>>();
+    let mut closest = f32::INFINITY;
+    for _ in 0..(5.0 / FRAME) as usize {
+        app.update();
+        let center = q.single(app.world()).unwrap().translation();
+        for x in particles_of(&app, e) {
+            closest = closest.min(x.distance(center) - radius);
+        }
+    }
+    println!(
+        "closest approach to the sphere's surface over 5 s: {closest:.4} m (thickness {thickness})"
+    );
+    assert_eq!(status(&app, e).state, BodyState::Running);
+    assert!(closest >= thickness - 1e-3, "{closest}");
+}
+
+fn ground(app: &mut App, friction: f32, restitution: f32) {
+    app.world_mut()
+        .spawn(SoftBodyCollider::ground().with_material(friction, restitution, 0.0));
+}
+
+fn lone_particle(app: &mut App, position: Vec3, velocity: Vec3, h: f64) -> Entity {
+    let body = app
+        .world_mut()
+        .spawn(SoftBody {
+            integrator: IntegratorKind::SymplecticEuler,
+            step: StepPolicy::Fixed { h },
+            ..Default::default()
+        })
+        .id();
+    app.world_mut().spawn((
+        Particle {
+            position,
+            velocity,
+            mass: 0.1,
+        },
+        ParticleOf(body),
+    ));
+    body
+}
+
+#[test]
+fn a_dropped_particle_rebounds_to_e_squared_times_its_height() {
+    // Dropped from h₀ = 1 m on a plane with restitution e = 0.5: it leaves the plane with e
+    // times its impact speed, so it climbs to e² h₀ = 0.25 m. Error sources: the impact speed
+    // is read up to one substep (h = 1/1024 s) late, g h / v ≈ 0.2 %; the apex is sampled
+    // once per frame, ½ g (Δt/2)² ≈ 0.3 mm.
+    let mut app = app();
+    ground(&mut app, 0.0, 0.5);
+    let body = lone_particle(&mut app, Vec3::Y, Vec3::ZERO, 1.0 / 1024.0);
+    let (mut bounced, mut apex) = (false, 0.0f32);
+    for _ in 0..128 {
+        app.update();
+        let p = app
+            .world()
+            .get::<BodySim>(body)
+            .unwrap()
+            .simulation()
+            .unwrap()
+            .state
+            .v[0];
+        let y = particles_of(&app, body)[0].y;
+        if p.y > 0.0 {
+            bounced = true;
+        }
+        if bounced {
+            apex = apex.max(y);
+        }
+    }
+    println!("apex after the bounce: {apex:.4} m (e² h₀ = 0.25 m)");
+    assert!(bounced);
+    assert!((apex - 0.25).abs() <= 0.02 * 0.25, "{apex}");
+}
+
+#[test]
+fn a_sliding_particle_stops_where_coulomb_friction_says() {
+    // Sliding at v₀ = 2 m/s on a plane with μ = 0.3: deceleration μ g, stopping distance
+    // v₀² / (2 μ g) = 0.6796 m.
+    let mut app = app();
+    ground(&mut app, 0.3, 0.0);
+    let body = lone_particle(&mut app, Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), 1.0 / 1024.0);
+    for _ in 0..128 {
+        app.update();
+    }
+    let x = particles_of(&app, body)[0];
+    let expected = 4.0 / (2.0 * 0.3 * 9.81);
+    println!(
+        "stopped at x = {:.4} m (Coulomb: {expected:.4} m), y = {:.2e}",
+        x.x, x.y
+    );
+    assert!((x.x - expected).abs() <= 0.05 * expected, "{x}");
+}
+
+#[test]
+fn despawning_springs_and_particles_mid_run_keeps_the_body_stepping() {
+    let mut app = app();
+    let e = spawn(&mut app, &chain_scene(), SoftBody::default());
+    for _ in 0..30 {
+        app.update();
+    }
+    let spring = app.world().get::<BodySprings>(e).unwrap().entities()[3];
+    app.world_mut().despawn(spring);
+    for _ in 0..30 {
+        app.update();
+    }
+    assert_eq!(status(&app, e).springs, 3, "the cut spring is gone");
+    // A particle two springs refer to: they are left out with a warning.
+    let middle = app.world().get::<BodyParticles>(e).unwrap().entities()[2];
+    app.world_mut().despawn(middle);
+    for _ in 0..30 {
+        app.update();
+    }
+    let st = status(&app, e);
+    assert_eq!(st.state, BodyState::Running);
+    assert_eq!(st.particles, 4);
+    assert_eq!(
+        st.springs, 1,
+        "only the spring between particles 0 and 1 is left"
+    );
+    assert_eq!(frames(&app, e), 30, "30 frames since the rebuild");
+    assert!(particles_of(&app, e).iter().all(|x| x.is_finite()));
+}
+
+#[test]
+fn mesh_vertices_are_the_particles_and_normals_are_unit() {
+    let mut app = app();
+    app.add_plugins(bevy::asset::AssetPlugin::default())
+        .init_asset::<Mesh>();
+    let scene = build::cloth(&build::ClothParams::default()).unwrap();
+    let e = spawn(&mut app, &scene, SoftBody::default());
+    for _ in 0..20 {
+        app.update();
+    }
+    let xs = particles_of(&app, e);
+    let handle = app
+        .world()
+        .get::<Mesh3d>(e)
+        .expect("a mesh was made")
+        .0
+        .clone();
+    let meshes = app.world().resource::<Assets<Mesh>>();
+    let mesh = meshes.get(&handle).unwrap();
+    let pos = mesh
+        .attribute(Mesh::ATTRIBUTE_POSITION)
+        .unwrap()
+        .as_float3()
+        .unwrap();
+    let nrm = match mesh.attribute(Mesh::ATTRIBUTE_NORMAL).unwrap() {
+        bevy::mesh::VertexAttributeValues::Float32x3(n) => n.clone(),
+        _ => panic!("normals"),
+    };
+    assert_eq!(pos.len(), xs.len());
+    for (p, x) in pos.iter().zip(&xs) {
+        assert_eq!(Vec3::from_array(*p), *x);
+    }
+    for n in nrm {
+        assert!((Vec3::from_array(n).length() - 1.0).abs() < 1e-5);
+    }
+    assert!(app.world().get::<SoftBodySurface>(e).is_some());
+}
+
+#[test]
+fn bad_input_leaves_the_body_out_with_a_message_naming_the_culprit() {
+    let mut app = app();
+    let good = spawn(&mut app, &chain_scene(), SoftBody::default());
+    let mk = |app: &mut App, body: SoftBody, mass: f32, pos: Vec3| {
+        let b = app.world_mut().spawn(body).id();
+        let p = app
+            .world_mut()
+            .spawn((
+                Particle {
+                    position: pos,
+                    velocity: Vec3::ZERO,
+                    mass,
+                },
+                ParticleOf(b),
+            ))
+            .id();
+        (b, p)
+    };
+    let (massless, mp) = mk(&mut app, SoftBody::default(), 0.0, Vec3::ZERO);
+    let (nan, np) = mk(&mut app, SoftBody::default(), 1.0, Vec3::NAN);
+    let bad_h = SoftBody {
+        step: StepPolicy::Fixed { h: 0.0 },
+        ..Default::default()
+    };
+    let (zero_h, _) = mk(&mut app, bad_h, 1.0, Vec3::ZERO);
+    // A spring to an entity that is no particle: left out, the body runs.
+    let (lonely, lp) = mk(&mut app, SoftBody::default(), 1.0, Vec3::ZERO);
+    let stranger = app.world_mut().spawn_empty().id();
+    app.world_mut().spawn((
+        Spring {
+            a: lp,
+            b: stranger,
+            rest_length: 1.0,
+            stiffness: 10.0,
+            damping: 0.0,
+            law: Default::default(),
+        },
+        SpringOf(lonely),
+    ));
+    for _ in 0..10 {
+        app.update();
+    }
+    let invalid = |e: Entity| match status(&app, e).state {
+        BodyState::Invalid(m) => m,
+        other => panic!("{e}: {other:?}"),
+    };
+    let m = invalid(massless);
+    println!("{m}");
+    assert!(m.contains(&mp.to_string()) && m.contains("mass"), "{m}");
+    let m = invalid(nan);
+    println!("{m}");
+    assert!(
+        m.contains(&np.to_string()) && m.contains("not finite"),
+        "{m}"
+    );
+    let m = invalid(zero_h);
+    println!("{m}");
+    assert!(m.contains("h = 0"), "{m}");
+    assert_eq!(status(&app, lonely).state, BodyState::Running);
+    assert_eq!(status(&app, lonely).springs, 0);
+    // The good body kept stepping, finite; nothing was written into the bad ones.
+    assert_eq!(frames(&app, good), 10);
+    assert!(particles_of(&app, good).iter().all(|x| x.is_finite()));
+    assert!(
+        app.world()
+            .get::<BodySim>(nan)
+            .unwrap()
+            .simulation()
+            .is_none()
+    );
+}
