@@ -53,8 +53,9 @@ pub mod prelude {
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{
         BodyParticles, BodySprings, BodyState, ExternalForce, GlobalWind, Particle, ParticleOf,
-        Pinned, ScriptedMotion, SoftBody, SoftBodyCollider, SoftBodyDiverged, SoftBodyInvalid,
-        SoftBodyPlugin, SoftBodySet, SoftBodyStatus, SoftBodyWind, SpawnSoftBody, Spring, SpringOf,
+        Pinned, ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider,
+        SoftBodyDiverged, SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodySet,
+        SoftBodyStatus, SoftBodyWind, SpawnSoftBody, Spring, SpringOf,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{SoftBodyDebug, SoftBodySurface};

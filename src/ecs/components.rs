@@ -382,6 +382,37 @@ impl SoftBodyCollider {
 #[reflect(Component, Debug)]
 pub struct ScriptedMotion(pub Motion);
 
+/// The plugin's own clock: pause, single step and the time [`ScriptedMotion`] follows.
+#[derive(Resource, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Resource, Default, Debug)]
+pub struct SoftBodyClock {
+    /// Simulated time since start or the last reset (s).
+    pub elapsed: f64,
+    /// Stop every body and scripted motion.
+    pub paused: bool,
+    /// While paused: advance one fixed step, then stay paused.
+    pub step_once: bool,
+}
+
+impl SoftBodyClock {
+    /// True when this fixed step advances the world.
+    pub fn running(&self) -> bool {
+        !self.paused || self.step_once
+    }
+}
+
+/// The particles' states when the body was spawned, for [`ResetSoftBodies`].
+#[derive(Component, Reflect, Clone, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodyInitial {
+    /// Particle entity, position and velocity at spawn.
+    pub particles: Vec<(Entity, Vec3, Vec3)>,
+}
+
+/// Send to put every body with a [`SoftBodyInitial`] back to it and the clock back to zero.
+#[derive(Message, Clone, Copy, Debug, Default)]
+pub struct ResetSoftBodies;
+
 /// Sent when a body diverges: it stops, keeps its last good state, and the others go on.
 #[derive(Message, Clone, Debug)]
 pub struct SoftBodyDiverged {

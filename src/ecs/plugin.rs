@@ -66,6 +66,10 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<GlobalWind>()
             .register_type::<SoftBodyCollider>()
             .register_type::<ScriptedMotion>()
+            .register_type::<SoftBodyClock>()
+            .register_type::<SoftBodyInitial>()
+            .init_resource::<SoftBodyClock>()
+            .add_message::<ResetSoftBodies>()
             .register_type::<crate::render::SoftBodySurface>()
             .register_type::<crate::render::SoftBodyDebug>()
             .init_resource::<GlobalWind>()
@@ -84,11 +88,11 @@ impl Plugin for SoftBodyPlugin {
             .add_systems(
                 self.schedule,
                 (
-                    (scripted_motion, prepare)
+                    (reset, scripted_motion, prepare)
                         .chain()
                         .in_set(SoftBodySet::Prepare),
                     step.in_set(SoftBodySet::Step),
-                    writeback.in_set(SoftBodySet::Writeback),
+                    (writeback, tick).chain().in_set(SoftBodySet::Writeback),
                 ),
             );
         crate::render::build(app);
@@ -138,11 +142,46 @@ pub struct ColliderTrack {
     prev: Option<(Vec3, Quat)>,
 }
 
+/// Puts bodies back to their spawn state on [`ResetSoftBodies`].
+fn reset(
+    mut msgs: MessageReader<ResetSoftBodies>,
+    mut clock: ResMut<SoftBodyClock>,
+    mut bodies: Query<(&mut SoftBody, &SoftBodyInitial)>,
+    mut particles: Query<&mut Particle>,
+) {
+    if msgs.read().count() == 0 {
+        return;
+    }
+    clock.elapsed = 0.0;
+    for (mut body, init) in &mut bodies {
+        body.set_changed(); // rebuild: time, integrator history and divergence start afresh
+        for (e, x, v) in &init.particles {
+            if let Ok(mut p) = particles.get_mut(*e) {
+                p.position = *x;
+                p.velocity = *v;
+            }
+        }
+    }
+}
+
+/// Advances the plugin's clock after a step.
+fn tick(mut clock: ResMut<SoftBodyClock>, fixed: Res<Time<Fixed>>) {
+    if clock.running() {
+        clock.elapsed += fixed.timestep().as_secs_f64();
+        clock.step_once = false;
+    }
+}
+
 fn scripted_motion(
-    time: Res<Time>,
+    clock: Res<SoftBodyClock>,
+    fixed: Res<Time<Fixed>>,
     mut q: Query<(&ScriptedMotion, &mut Transform, &mut GlobalTransform), Without<ChildOf>>,
 ) {
-    let t = time.elapsed_secs_f64() as Scalar;
+    if !clock.running() {
+        return;
+    }
+    // Poses at the end of the step about to be taken.
+    let t = (clock.elapsed + fixed.timestep().as_secs_f64()) as Scalar;
     for (m, mut tf, mut gt) in &mut q {
         tf.translation = to_f32(m.0.position(t));
         // Top-level entity: its global transform is its transform; set it now so this fixed
@@ -360,6 +399,8 @@ fn prepare(
     )>,
     particles: Query<ParticleItem>,
     springs: Query<Ref<Spring>>,
+    changed_springs: Query<&SpringOf, Changed<Spring>>,
+    changed_setup: Query<&ParticleOf, Or<(Changed<Pinned>, Changed<ExternalForce>)>>,
     targets: Query<&GlobalTransform>,
     colliders: Query<(&SoftBodyCollider, &GlobalTransform, &ColliderTrack)>,
     mut removed_particles: RemovedComponents<Particle>,
@@ -377,6 +418,12 @@ fn prepare(
         + removed_forces.read().count()
         + removed_winds.read().count()
         > 0;
+    // Bodies whose springs, pins or forces were edited (one pass over the changed ones, not a
+    // lookup per spring of every body).
+    let mut edited: Vec<Entity> = changed_springs.iter().map(|s| s.0).collect();
+    edited.extend(changed_setup.iter().map(|p| p.0));
+    edited.sort_unstable();
+    edited.dedup();
     let no_list: &[Entity] = &[];
     for (body_e, body, mut bs, mut status, plist, slist, wind) in &mut bodies {
         let plist = plist.map_or(no_list, |p| p.entities());
@@ -391,11 +438,7 @@ fn prepare(
             || bs.springs.as_slice() != slist
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
-        if !dirty {
-            dirty = slist
-                .iter()
-                .any(|e| springs.get(*e).is_ok_and(|s| s.is_changed()));
-        }
+        dirty |= edited.binary_search(&body_e).is_ok();
         if !dirty && bs.problem.is_some() {
             // Left out for bad input: retry when any of its particles is edited.
             dirty = plist.iter().any(|e| {
@@ -411,14 +454,11 @@ fn prepare(
             // edited (not by our writeback) → teleport.
             let masses = sim.system.mass();
             for (i, &e) in bs.particles.iter().enumerate() {
-                let Ok((p, pin, force)) = particles.get(e) else {
+                let Ok((p, _, _)) = particles.get(e) else {
                     dirty = true;
                     break;
                 };
-                if pin.is_some_and(|p| p.is_changed())
-                    || force.is_some_and(|f| f.is_changed())
-                    || p.mass as Scalar != masses[i]
-                {
+                if p.mass as Scalar != masses[i] {
                     dirty = true;
                     break;
                 }
@@ -504,7 +544,13 @@ fn prepare(
     }
 }
 
-fn step(mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>) {
+fn step(
+    clock: Res<SoftBodyClock>,
+    mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
+) {
+    if !clock.running() {
+        return;
+    }
     bodies
         .par_iter_mut()
         .for_each(|(body, mut bs, mut status)| {

@@ -66,6 +66,13 @@ impl SpawnSoftBody for Commands<'_, '_> {
                 e.id()
             })
             .collect();
+        self.entity(root).insert(SoftBodyInitial {
+            particles: ids
+                .iter()
+                .zip(&scene.particles)
+                .map(|(e, p)| (*e, v(p.position), v(p.velocity)))
+                .collect(),
+        });
         for (k, s) in scene.springs.iter().enumerate() {
             self.spawn((
                 Spring {

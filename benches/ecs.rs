@@ -1,0 +1,86 @@
+//! What the ECS layer costs over the core driver: the same 64×64 cloth advanced one 1/60 s
+//! frame at a time by `Simulation::advance_frame` directly and by a headless Bevy App
+//! (`MinimalPlugins` + `SoftBodyPlugin`, one fixed step per `update`), which adds the change
+//! scan of every particle and spring (prepare), the collider pass and the writeback into
+//! 4,096 `Particle` components. Two loads: RK4 at h = 1/960 (16 substeps per frame) and
+//! linearly implicit Euler at h = 1/60 (one step per frame, the cheapest frame).
+//!
+//! `cargo bench --bench ecs`. Target (issue 3): at most 10 % over the core driver.
+
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_soft_body::core::build;
+use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
+use bevy_soft_body::core::integrate::IntegratorKind;
+use bevy_soft_body::ecs::{SoftBody, SoftBodyPlugin, SpawnSoftBody};
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::time::Duration;
+
+fn bench(c: &mut Criterion) {
+    let frame = Duration::from_secs_f64(1.0 / 60.0);
+    let scene = build::cloth(&build::ClothParams::default().resized(64, 64)).unwrap();
+    let mut g = c.benchmark_group("ecs_overhead_64x64");
+    g.sample_size(20);
+    for (kind, h) in [
+        (IntegratorKind::Rk4, 1.0 / 960.0),
+        (IntegratorKind::LinearlyImplicitEuler, 1.0 / 60.0),
+    ] {
+        let (model, state) = scene.build().unwrap();
+        let mut core = Simulation::new(
+            model,
+            state,
+            DriverConfig {
+                integrator: kind,
+                policy: StepPolicy::Fixed { h },
+                frame_dt: frame.as_secs_f64(),
+                ..Default::default()
+            },
+        );
+        for _ in 0..30 {
+            core.advance_frame().unwrap();
+        }
+        g.bench_function(format!("{}/core", kind.name()), |b| {
+            b.iter(|| core.advance_frame().unwrap())
+        });
+
+        let mut app = App::new();
+        app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+            .insert_resource(Time::<Fixed>::from_duration(frame))
+            .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+        let sc = scene.clone();
+        let body = SoftBody {
+            integrator: kind,
+            step: StepPolicy::Fixed { h },
+            ..Default::default()
+        };
+        app.world_mut()
+            .run_system_once(move |mut cmd: Commands| {
+                cmd.spawn_soft_body(&sc, body.clone()).unwrap();
+            })
+            .unwrap();
+        for _ in 0..31 {
+            app.update();
+        }
+        g.bench_function(format!("{}/ecs", kind.name()), |b| b.iter(|| app.update()));
+    }
+    // The App's own cost per update with no body (schedules, time, empty queries).
+    let mut empty = App::new();
+    empty
+        .add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+        .insert_resource(Time::<Fixed>::from_duration(frame))
+        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+    empty.update();
+    g.bench_function("no_body/ecs", |b| b.iter(|| empty.update()));
+    let mut bare = App::new();
+    bare.add_plugins((MinimalPlugins, TransformPlugin))
+        .insert_resource(Time::<Fixed>::from_duration(frame))
+        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+    bare.update();
+    g.bench_function("no_plugin/bevy", |b| b.iter(|| bare.update()));
+    g.finish();
+}
+
+use bevy::ecs::system::RunSystemOnce;
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
