@@ -1,73 +1,32 @@
 //! The main job: a 32×32 cloth held by its two top corners, and a sphere swinging back and
-//! forth through it, smooth shaded. Like the classic sample solution, the integrator letter
-//! and step size come from the command line:
+//! forth through it, smooth shaded — through `SoftBodyPlugin`: the cloth is a body of particle
+//! and spring entities spawned from the core's `cloth_sphere` scene, the sphere a
+//! `SoftBodyCollider` moved by a `ScriptedMotion`. Like the classic sample solution, the
+//! integrator letter and step size come from the command line:
 //!
 //! ```text
 //! cargo run --release --example cloth_sphere              # RK4, h = 0.0025
 //! cargo run --release --example cloth_sphere -- r 0.005   # RK4 at twice the step: diverges, and says so
 //! cargo run --release --example cloth_sphere -- s 0.001   # symplectic Euler
+//! cargo run --release --example cloth_sphere -- i 0.0167  # linearly implicit Euler, one step per frame
+//! cargo run --release --example cloth_sphere -- b 0.0167  # Newton backward Euler, one step per frame
 //! cargo run --release --example cloth_sphere -- t 0.001 --size 24
 //! ```
 //!
 //! Letters: e forward Euler, s symplectic Euler, t trapezoid, m midpoint, r RK4, a RK45,
-//! i linearly implicit Euler (`cloth_sphere -- i 0.0167`: h above the 1/60 s frame, so each frame is one step),
-//! d trapezoid with implicit damping, b backward Euler (Newton).
+//! i linearly implicit Euler, d trapezoid with implicit damping, b backward Euler (Newton).
 //!
-//! Keys: Space pause/resume, R reset, E/S/T/M/K/A/I/D/B switch integrator (K = RK4),
-//! Left/Right orbit the camera, Up/Down zoom.
+//! Keys (the `SoftBodyUiPlugin` panel shows them too): Space pause/resume, N single step,
+//! R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B switch integrator (K = RK4). Mouse: left
+//! drag pulls the nearest particle, right drag or arrows orbit, wheel or Up/Down zoom.
 //!
-//! `--screenshot FILE [--frames N]` renders N frames of exactly 1/60 s each (default 270, the
-//! sphere swinging out through the cloth at t = 4.5 s), saves a PNG and exits.
-//!
-//! This example drives the core's headless [`Simulation`] from a Bevy system and draws its
-//! state; it shows what the numerics do before the ECS plugin (components per particle and
-//! spring) exists.
+//! `--screenshot FILE [--frames N]` renders N frames of exactly 1/60 s each (default 150: the
+//! sphere, which starts behind the cloth, has pushed it forward and is draped by it at
+//! t = 2.5 s), saves a PNG and exits.
 
-// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
-#![allow(clippy::unnecessary_cast)]
-
-use bevy::asset::RenderAssetUsages;
-use bevy::mesh::{Indices, PrimitiveTopology};
 use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
-use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
-use bevy_soft_body::core::collide::ShapeDesc;
-use bevy_soft_body::core::motion::Motion;
-use bevy_soft_body::math::to_f32;
 use bevy_soft_body::prelude::*;
-
-/// The simulation and how to rebuild it.
-#[derive(Resource)]
-struct ClothSim {
-    sim: Simulation<ParticleState, ParticleModel>,
-    scene: Scene,
-    config: DriverConfig,
-    paused: bool,
-    status: String,
-}
-
-impl ClothSim {
-    fn reset(&mut self) {
-        let (model, state) = self.scene.build().expect("built-in scene is valid");
-        self.sim = Simulation::new(model, state, self.config);
-        self.paused = false;
-        self.status.clear();
-    }
-}
-
-#[derive(Component)]
-struct ClothMesh(Handle<Mesh>);
-
-#[derive(Component)]
-struct Ball {
-    motion: Motion,
-}
-
-#[derive(Resource)]
-struct Orbit {
-    yaw: f32,
-    distance: f32,
-}
 
 #[derive(Resource)]
 struct ShotPlan {
@@ -92,7 +51,7 @@ fn parse_args() -> Result<Args, String> {
         h: 0.0025,
         size: 32,
         screenshot: None,
-        frames: 270,
+        frames: 150,
     };
     let mut positional = 0;
     let mut it = std::env::args().skip(1);
@@ -152,25 +111,16 @@ fn main() {
         damping: 0.1,
         ..Default::default()
     };
-    let params = base.resized(args.size, args.size);
-    let scene = build::cloth_sphere(&params, 0.25, 0.6, 4.0).expect("valid cloth size");
-    let config = DriverConfig {
+    let scene = build::cloth_sphere(&base.resized(args.size, args.size), 0.25, 0.6, 4.0)
+        .expect("valid cloth size");
+    let body = SoftBody {
         integrator: args.integrator,
-        policy: StepPolicy::Fixed { h: args.h },
-        frame_dt: 1.0 / 60.0,
-        // This scene's internal energy stays far below its energy scale (the cloth swings under
-        // gravity, the sphere moves at ~1 m/s), so a guard of 10× stops a diverging method
-        // while the last good frame still looks like a cloth.
+        step: StepPolicy::Fixed { h: args.h },
+        // This scene's internal energy stays far below its energy scale (the cloth swings
+        // under gravity, the sphere moves at ~1 m/s), so a guard of 10× stops a diverging
+        // method while the last good frame still looks like a cloth.
         energy_guard: Some(10.0),
         ..Default::default()
-    };
-    let (model, state) = scene.build().expect("built-in scene is valid");
-    let sim = ClothSim {
-        sim: Simulation::new(model, state, config),
-        scene,
-        config,
-        paused: false,
-        status: String::new(),
     };
 
     let mut app = App::new();
@@ -181,18 +131,15 @@ fn main() {
         }),
         ..default()
     }))
+    .add_plugins((SoftBodyPlugin::default(), SoftBodyUiPlugin))
     .insert_resource(Time::<Fixed>::from_hz(60.0))
     .insert_resource(ClearColor(Color::srgb(0.09, 0.10, 0.12)))
-    .insert_resource(sim)
-    .insert_resource(Orbit {
-        yaw: 0.5,
-        distance: 2.4,
-    })
-    .add_systems(Startup, setup)
-    .add_systems(FixedUpdate, step)
-    .add_plugins(EguiPlugin::default())
-    .add_systems(Update, (keys, sync_cloth, sync_ball, camera))
-    .add_systems(EguiPrimaryContextPass, hud);
+    .add_systems(Startup, move |mut commands: Commands| {
+        commands
+            .spawn_soft_body(&scene, body.clone())
+            .expect("built-in scene is valid");
+        lights_and_camera(&mut commands);
+    });
     if let Some(path) = args.screenshot {
         // Deterministic: every rendered frame advances exactly one 1/60 s fixed step, however
         // slow the renderer, so frame N shows t = N/60.
@@ -211,54 +158,7 @@ fn main() {
     app.run();
 }
 
-fn setup(
-    mut commands: Commands,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
-    sim: Res<ClothSim>,
-) {
-    let surface = sim.scene.surface.clone().unwrap_or_default();
-    let positions = mesh_positions(&sim.sim.state);
-    let mut mesh = Mesh::new(
-        PrimitiveTopology::TriangleList,
-        RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
-    );
-    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
-    mesh.insert_attribute(Mesh::ATTRIBUTE_UV_0, surface.uvs.clone());
-    mesh.insert_indices(Indices::U32(
-        surface.triangles.iter().flatten().copied().collect(),
-    ));
-    mesh.compute_smooth_normals();
-    let handle = meshes.add(mesh);
-    commands.spawn((
-        Mesh3d(handle.clone()),
-        MeshMaterial3d(materials.add(StandardMaterial {
-            base_color: Color::srgb(0.85, 0.25, 0.22),
-            perceptual_roughness: 0.8,
-            double_sided: true,
-            cull_mode: None,
-            ..default()
-        })),
-        Transform::IDENTITY,
-        ClothMesh(handle),
-    ));
-    for c in &sim.scene.colliders {
-        if let ShapeDesc::Sphere { radius } = c.shape {
-            commands.spawn((
-                // Drawn slightly smaller than the collider plus its contact thickness, so the
-                // cloth rests visibly on the surface rather than inside it.
-                Mesh3d(meshes.add(Sphere::new(radius as f32).mesh().uv(48, 24))),
-                MeshMaterial3d(materials.add(StandardMaterial {
-                    base_color: Color::srgb(0.75, 0.78, 0.82),
-                    metallic: 0.2,
-                    perceptual_roughness: 0.4,
-                    ..default()
-                })),
-                Transform::from_translation(to_f32(c.motion.position(0.0))),
-                Ball { motion: c.motion },
-            ));
-        }
-    }
+fn lights_and_camera(commands: &mut Commands) {
     commands.spawn((
         DirectionalLight {
             illuminance: 9000.0,
@@ -275,137 +175,12 @@ fn setup(
         },
         Transform::from_xyz(-2.5, 2.0, -2.0),
     ));
-    commands.spawn((
-        Camera3d::default(),
-        Transform::from_xyz(0.0, 0.6, 3.2).looking_at(Vec3::new(0.0, 0.45, 0.0), Vec3::Y),
-    ));
-}
-
-/// Particle positions as Bevy mesh vertex positions.
-fn mesh_positions(state: &ParticleState) -> Vec<[f32; 3]> {
-    state.x.iter().map(|x| to_f32(*x).to_array()).collect()
-}
-
-fn step(mut sim: ResMut<ClothSim>) {
-    if sim.paused {
-        return;
-    }
-    if let Err(d) = sim.sim.advance_frame() {
-        warn!("{d}");
-        sim.status = format!("DIVERGED: {d}\nPress R to reset, or pick another method.");
-        sim.paused = true;
-    }
-}
-
-fn keys(
-    input: Res<ButtonInput<KeyCode>>,
-    mut sim: ResMut<ClothSim>,
-    mut orbit: ResMut<Orbit>,
-    time: Res<Time>,
-) {
-    if input.just_pressed(KeyCode::Space) {
-        sim.paused = !sim.paused;
-    }
-    if input.just_pressed(KeyCode::KeyR) {
-        sim.reset();
-    }
-    for (key, kind) in [
-        (KeyCode::KeyE, IntegratorKind::ForwardEuler),
-        (KeyCode::KeyS, IntegratorKind::SymplecticEuler),
-        (KeyCode::KeyT, IntegratorKind::Trapezoid),
-        (KeyCode::KeyM, IntegratorKind::Midpoint),
-        (KeyCode::KeyK, IntegratorKind::Rk4),
-        (KeyCode::KeyA, IntegratorKind::Rk45),
-        (KeyCode::KeyI, IntegratorKind::LinearlyImplicitEuler),
-        (KeyCode::KeyD, IntegratorKind::ImplicitDampingTrapezoid),
-        (KeyCode::KeyB, IntegratorKind::BackwardEuler),
-    ] {
-        if input.just_pressed(key) {
-            sim.config.integrator = kind;
-            sim.sim.set_integrator(kind);
-        }
-    }
-    let dt = time.delta_secs();
-    if input.pressed(KeyCode::ArrowLeft) {
-        orbit.yaw -= dt;
-    }
-    if input.pressed(KeyCode::ArrowRight) {
-        orbit.yaw += dt;
-    }
-    if input.pressed(KeyCode::ArrowUp) {
-        orbit.distance = (orbit.distance - 2.0 * dt).max(1.0);
-    }
-    if input.pressed(KeyCode::ArrowDown) {
-        orbit.distance = (orbit.distance + 2.0 * dt).min(10.0);
-    }
-}
-
-fn sync_cloth(sim: Res<ClothSim>, q: Query<&ClothMesh>, mut meshes: ResMut<Assets<Mesh>>) {
-    if !sim.is_changed() {
-        return;
-    }
-    for cm in &q {
-        let Some(mut mesh) = meshes.get_mut(&cm.0) else {
-            continue;
-        };
-        // The driver restores the last good state on divergence, so this is always finite.
-        let positions = mesh_positions(&sim.sim.state);
-        mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
-        mesh.compute_smooth_normals();
-    }
-}
-
-fn sync_ball(sim: Res<ClothSim>, mut q: Query<(&Ball, &mut Transform)>) {
-    for (b, mut t) in &mut q {
-        t.translation = to_f32(b.motion.position(sim.sim.time));
-    }
-}
-
-fn camera(orbit: Res<Orbit>, mut q: Query<&mut Transform, With<Camera3d>>) {
-    let target = Vec3::new(0.0, 0.45, 0.0);
-    for mut t in &mut q {
-        let eye = target
-            + Vec3::new(
-                orbit.distance * orbit.yaw.sin(),
-                0.3,
-                orbit.distance * orbit.yaw.cos(),
-            );
-        *t = Transform::from_translation(eye).looking_at(target, Vec3::Y);
-    }
-}
-
-fn hud(sim: Res<ClothSim>, mut contexts: EguiContexts) -> Result {
-    let st = sim.sim.stats();
-    let n = sim.sim.system.len();
-    let text = format!(
-        "{} particles, {} springs  [{}]\n{}  h = {}  t = {:.2} s  steps {}  evaluations {}  CG iterations {}{}\n{}",
-        n,
-        sim.sim.system.springs.len(),
-        bevy_soft_body::math::PRECISION,
-        sim.config.integrator.label(),
-        match sim.config.policy {
-            StepPolicy::Fixed { h } => h,
-            StepPolicy::Cfl { max, .. } => max,
-        },
-        sim.sim.time,
-        st.steps,
-        st.evaluations,
-        st.linear_iterations,
-        if sim.paused && sim.status.is_empty() {
-            "  (paused)"
-        } else {
-            ""
-        },
-        sim.status
-    );
-    egui::Window::new("cloth_sphere")
-        .anchor(egui::Align2::LEFT_TOP, [8.0, 8.0])
-        .resizable(false)
-        .show(contexts.ctx_mut()?, |ui| {
-            ui.label(text);
-            ui.small("Space pause · R reset · E S T M K A I method · arrows orbit/zoom");
-        });
-    Ok(())
+    commands.spawn(OrbitCamera {
+        target: Vec3::new(0.0, 0.45, 0.0),
+        yaw: 0.5,
+        pitch: 0.12,
+        distance: 2.4,
+    });
 }
 
 fn screenshot(

@@ -8,7 +8,8 @@
 //!   integrators ([`core::integrate`]), the particle model and its forces, collisions, scene
 //!   layouts ([`core::scene`], [`core::build`]) and the headless driver ([`core::driver`]).
 //! - the Bevy face (feature `plugin`, on by default): [`ecs`] (components, `SoftBodyPlugin`,
-//!   spawning scenes) and [`render`] (deforming meshes, gizmos).
+//!   spawning scenes), [`render`] (deforming meshes, gizmos) and, with feature `egui`, `ui`
+//!   (panel, keys, mouse grab, orbit camera).
 //!
 //! Layout is not driver: what a scene contains is described apart from how it is advanced,
 //! so switching from RK4 to symplectic Euler is one [`IntegratorKind`] value.
@@ -34,6 +35,8 @@ pub mod ecs;
 pub mod math;
 #[cfg(feature = "plugin")]
 pub mod render;
+#[cfg(feature = "egui")]
+pub mod ui;
 
 /// The names most programs need.
 pub mod prelude {
@@ -59,6 +62,8 @@ pub mod prelude {
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{SoftBodyDebug, SoftBodySurface};
+    #[cfg(feature = "egui")]
+    pub use crate::ui::{OrbitCamera, SoftBodyUi, SoftBodyUiPlugin};
 }
 
 pub use crate::core::integrate::IntegratorKind;

@@ -98,6 +98,8 @@ pub struct SoftBodyStatus {
     pub particles: u32,
     /// Springs in the packed model.
     pub springs: u32,
+    /// Times the packed model was rebuilt (topology or parameter changes).
+    pub rebuilds: u32,
 }
 
 /// The state a [`SoftBodyStatus`] reports.

@@ -172,17 +172,30 @@ fn tick(mut clock: ResMut<SoftBodyClock>, fixed: Res<Time<Fixed>>) {
     }
 }
 
+type ScriptedItem<'a> = (
+    &'a ScriptedMotion,
+    &'a mut Transform,
+    &'a mut GlobalTransform,
+    Option<&'a mut ColliderTrack>,
+);
+
 fn scripted_motion(
     clock: Res<SoftBodyClock>,
     fixed: Res<Time<Fixed>>,
-    mut q: Query<(&ScriptedMotion, &mut Transform, &mut GlobalTransform), Without<ChildOf>>,
+    mut q: Query<ScriptedItem, Without<ChildOf>>,
 ) {
     if !clock.running() {
         return;
     }
     // Poses at the end of the step about to be taken.
     let t = (clock.elapsed + fixed.timestep().as_secs_f64()) as Scalar;
-    for (m, mut tf, mut gt) in &mut q {
+    for (m, mut tf, mut gt, track) in &mut q {
+        // A new collider's first frame starts where it was spawned.
+        if let Some(mut track) = track
+            && track.prev.is_none()
+        {
+            track.prev = Some((tf.translation, tf.rotation));
+        }
         tf.translation = to_f32(m.0.position(t));
         // Top-level entity: its global transform is its transform; set it now so this fixed
         // step sees the new pose (propagation runs later, in PostUpdate).
@@ -497,6 +510,7 @@ fn prepare(
                         })
                         .collect();
                     status.particles = b.particles.len() as u32;
+                    status.rebuilds += 1;
                     status.springs = b.sim.system.springs.len() as u32;
                     bs.sim = Some(b.sim);
                     bs.particles = b.particles;

@@ -42,6 +42,9 @@ pub struct SoftBodyDebug {
     pub wireframe: bool,
     /// Radius of the particle spheres drawn for bodies without a surface (m).
     pub particle_radius: f32,
+    /// Give colliders without a mesh one of their shape (balls, ground planes, cuboids,
+    /// capsules), when the app renders.
+    pub show_colliders: bool,
 }
 
 impl Default for SoftBodyDebug {
@@ -49,12 +52,13 @@ impl Default for SoftBodyDebug {
         Self {
             wireframe: false,
             particle_radius: 0.02,
+            show_colliders: true,
         }
     }
 }
 
 pub(crate) fn build(app: &mut App) {
-    app.add_systems(PostUpdate, sync_surfaces);
+    app.add_systems(PostUpdate, (sync_surfaces, collider_meshes));
 }
 
 /// Adds the gizmo drawing when the app has gizmos (call after `DefaultPlugins`).
@@ -180,5 +184,57 @@ fn draw_gizmos(
                 );
             }
         }
+    }
+}
+
+fn collider_meshes(
+    mut commands: Commands,
+    debug: Res<SoftBodyDebug>,
+    meshes: Option<ResMut<Assets<Mesh>>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+    q: Query<(Entity, &crate::ecs::SoftBodyCollider), Without<Mesh3d>>,
+) {
+    let (Some(mut meshes), Some(mut materials)) = (meshes, materials) else {
+        return;
+    };
+    if !debug.show_colliders {
+        return;
+    }
+    for (e, c) in &q {
+        let shape = &c.shape.0;
+        let (mesh, color) = if let Some(b) = shape.as_ball() {
+            (
+                Sphere::new(b.radius).mesh().uv(48, 24),
+                Color::srgb(0.75, 0.78, 0.82),
+            )
+        } else if shape.as_halfspace().is_some() {
+            (
+                Plane3d::new(Vec3::Y, Vec2::splat(5.0)).mesh().build(),
+                Color::srgb(0.25, 0.27, 0.3),
+            )
+        } else if let Some(cu) = shape.as_cuboid() {
+            let h = cu.half_extents;
+            (
+                Cuboid::new(2.0 * h.x, 2.0 * h.y, 2.0 * h.z).mesh().build(),
+                Color::srgb(0.6, 0.62, 0.66),
+            )
+        } else if let Some(cap) = shape.as_capsule() {
+            let half = (cap.segment.b - cap.segment.a).length() * 0.5;
+            (
+                Capsule3d::new(cap.radius, 2.0 * half).mesh().build(),
+                Color::srgb(0.6, 0.62, 0.66),
+            )
+        } else {
+            continue;
+        };
+        commands.entity(e).insert((
+            Mesh3d(meshes.add(mesh)),
+            MeshMaterial3d(materials.add(StandardMaterial {
+                base_color: color,
+                metallic: 0.2,
+                perceptual_roughness: 0.5,
+                ..default()
+            })),
+        ));
     }
 }
