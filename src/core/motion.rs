@@ -106,6 +106,21 @@ impl Motion {
         }
     }
 
+    /// The same path shifted by `offset`.
+    pub fn translated(mut self, offset: [f64; 3]) -> Self {
+        let add = |p: &mut [f64; 3]| {
+            for (c, o) in p.iter_mut().zip(offset) {
+                *c += o;
+            }
+        };
+        match &mut self {
+            Motion::Fixed { position } => add(position),
+            Motion::Linear { start, .. } => add(start),
+            Motion::Circle { center, .. } | Motion::Oscillate { center, .. } => add(center),
+        }
+        self
+    }
+
     /// Position at time `t`.
     pub fn position(&self, t: Scalar) -> Vector {
         self.eval(t).0

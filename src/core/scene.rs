@@ -404,6 +404,23 @@ impl Scene {
         }
     }
 
+    /// The same scene moved by `offset`: particles, prescribed paths and colliders (to place
+    /// several scenes side by side).
+    pub fn translated(mut self, offset: [f64; 3]) -> Self {
+        for p in &mut self.particles {
+            for (c, o) in p.position.iter_mut().zip(offset) {
+                *c += o;
+            }
+        }
+        for m in &mut self.motions {
+            m.motion = m.motion.translated(offset);
+        }
+        for c in &mut self.colliders {
+            c.motion = c.motion.translated(offset);
+        }
+        self
+    }
+
     /// Validates and builds the model and its initial state.
     pub fn build(&self) -> Result<(ParticleModel, ParticleState), SceneError> {
         self.validate()?;

@@ -1,0 +1,170 @@
+//! What every windowed example shares: the App (window, `SoftBodyPlugin`, the
+//! `SoftBodyUiPlugin` panel and keys, 60 Hz fixed step), lights, an orbit camera, the
+//! `LETTER H` arguments of the classic sample solution and `--screenshot FILE [--frames N]`
+//! (N frames of exactly 1/60 s, then a PNG, then exit). Not an example itself.
+
+#![allow(dead_code)]
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
+use bevy::prelude::*;
+use bevy::render::view::screenshot::{Screenshot, save_to_disk};
+use bevy_soft_body::prelude::*;
+
+/// Command line: `[LETTER [H]] [--screenshot FILE] [--frames N]`.
+pub struct Args {
+    /// Integrator, when given.
+    pub integrator: Option<IntegratorKind>,
+    /// Step size, when given.
+    pub h: Option<f64>,
+    screenshot: Option<String>,
+    frames: u32,
+}
+
+/// Parses the arguments, or prints `usage` and exits.
+pub fn args(usage: &str) -> Args {
+    let mut a = Args {
+        integrator: None,
+        h: None,
+        screenshot: None,
+        frames: 180,
+    };
+    let mut it = std::env::args().skip(1);
+    let fail = |e: String| -> ! {
+        eprintln!("error: {e}\nusage: {usage} [LETTER [H]] [--screenshot FILE [--frames N]]");
+        std::process::exit(1)
+    };
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--screenshot" => {
+                a.screenshot = Some(
+                    it.next()
+                        .unwrap_or_else(|| fail("--screenshot needs a file".into())),
+                )
+            }
+            "--frames" => {
+                a.frames = it
+                    .next()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or_else(|| fail("--frames needs a count".into()))
+            }
+            _ if a.integrator.is_none() => {
+                a.integrator = Some(arg.parse().unwrap_or_else(|e| fail(format!("{e}"))))
+            }
+            _ if a.h.is_none() => {
+                let h: f64 = arg
+                    .parse()
+                    .unwrap_or_else(|_| fail(format!("step size '{arg}' is not a number")));
+                if !(h.is_finite() && h > 0.0) {
+                    fail(format!("step size must be positive, got {arg}"));
+                }
+                a.h = Some(h);
+            }
+            _ => fail(format!("unexpected argument '{arg}'")),
+        }
+    }
+    a
+}
+
+impl Args {
+    /// The body settings: the arguments over the example's defaults.
+    pub fn body(&self, integrator: IntegratorKind, h: f64) -> SoftBody {
+        SoftBody {
+            integrator: self.integrator.unwrap_or(integrator),
+            step: StepPolicy::Fixed {
+                h: self.h.unwrap_or(h),
+            },
+            ..Default::default()
+        }
+    }
+}
+
+#[derive(Resource)]
+struct ShotPlan {
+    path: String,
+    frames: u32,
+    seen: u32,
+    taken: bool,
+    wait: u32,
+}
+
+/// The App every example starts from.
+pub fn app(title: &str, args: &Args) -> App {
+    let mut app = App::new();
+    app.add_plugins(DefaultPlugins.set(WindowPlugin {
+        primary_window: Some(Window {
+            title: format!("bevy_soft_body: {title}"),
+            ..default()
+        }),
+        ..default()
+    }))
+    .add_plugins((SoftBodyPlugin::default(), SoftBodyUiPlugin))
+    .insert_resource(Time::<Fixed>::from_hz(60.0))
+    .insert_resource(ClearColor(Color::srgb(0.09, 0.10, 0.12)));
+    if let Some(path) = &args.screenshot {
+        app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            std::time::Duration::from_secs_f64(1.0 / 60.0),
+        ))
+        .insert_resource(ShotPlan {
+            path: path.clone(),
+            frames: args.frames,
+            seen: 0,
+            taken: false,
+            wait: 0,
+        })
+        .add_systems(Update, screenshot);
+    }
+    app
+}
+
+/// A key light with shadows, a fill light and an orbit camera looking at `target`.
+pub fn stage(commands: &mut Commands, target: Vec3, distance: f32) {
+    commands.spawn((
+        DirectionalLight {
+            illuminance: 9000.0,
+            shadow_maps_enabled: true,
+            ..default()
+        },
+        Transform::from_xyz(2.0, 4.0, 3.0).looking_at(Vec3::ZERO, Vec3::Y),
+    ));
+    commands.spawn((
+        PointLight {
+            intensity: 400_000.0,
+            range: 30.0,
+            ..default()
+        },
+        Transform::from_xyz(-2.5, 2.5, -2.0),
+    ));
+    commands.spawn(OrbitCamera {
+        target,
+        yaw: 0.5,
+        pitch: 0.25,
+        distance,
+    });
+}
+
+fn screenshot(
+    mut commands: Commands,
+    mut plan: ResMut<ShotPlan>,
+    mut exit: MessageWriter<AppExit>,
+) {
+    plan.seen += 1;
+    if !plan.taken && plan.seen >= plan.frames {
+        commands
+            .spawn(Screenshot::primary_window())
+            .observe(save_to_disk(plan.path.clone()));
+        plan.taken = true;
+    }
+    if plan.taken {
+        plan.wait += 1;
+        if plan.wait > 30 && std::path::Path::new(&plan.path).exists() {
+            exit.write(AppExit::Success);
+        }
+        if plan.wait > 600 {
+            error!("screenshot was not written");
+            exit.write(AppExit::error());
+        }
+    }
+}
+
+pub mod circle;
