@@ -397,6 +397,105 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
         assert!((Vec3::from_array(n).length() - 1.0).abs() < 1e-5);
     }
     assert!(app.world().get::<SoftBodySurface>(e).is_some());
+
+    // Interpolated drawing: between the last two fixed steps by the fixed clock's overstep,
+    // which is exactly zero when every update runs one whole fixed step — so the mesh shows
+    // the positions before the last step, while the components hold the last step.
+    app.world_mut()
+        .resource_mut::<bevy_soft_body::render::SoftBodyDebug>()
+        .interpolate = true;
+    app.update();
+    let prev = app
+        .world()
+        .get::<BodySim>(e)
+        .unwrap()
+        .previous_positions()
+        .to_vec();
+    let xs = particles_of(&app, e);
+    assert_eq!(prev.len(), xs.len());
+    assert_ne!(prev, xs, "the cloth moved in the last step");
+    let meshes = app.world().resource::<Assets<Mesh>>();
+    let pos = meshes
+        .get(&handle)
+        .unwrap()
+        .attribute(Mesh::ATTRIBUTE_POSITION)
+        .unwrap()
+        .as_float3()
+        .unwrap();
+    for (p, q) in pos.iter().zip(&prev) {
+        assert_eq!(Vec3::from_array(*p), *q);
+    }
+}
+
+#[test]
+fn particles_land_on_cuboids_and_trimeshes() {
+    // Any parry shape works through the general projection path: a particle dropped on a
+    // 1 m cuboid (top face at y = 0.5) and one on a two-triangle trimesh floor at y = 0.25
+    // come to rest on the surface plus the contact thickness (1 cm).
+    use parry3d::math::Vector as PVec;
+    use parry3d::shape::SharedShape;
+    let mut app = app();
+    app.world_mut().spawn((
+        SoftBodyCollider::new(SharedShape::cuboid(0.5, 0.5, 0.5)).with_material(0.5, 0.0, 0.01),
+        Transform::from_xyz(0.0, 0.0, 0.0),
+    ));
+    let floor = SharedShape::trimesh(
+        vec![
+            PVec::new(2.0, 0.25, -1.0),
+            PVec::new(4.0, 0.25, -1.0),
+            PVec::new(4.0, 0.25, 1.0),
+            PVec::new(2.0, 0.25, 1.0),
+        ],
+        vec![[0, 2, 1], [0, 3, 2]],
+    )
+    .unwrap();
+    app.world_mut()
+        .spawn(SoftBodyCollider::new(floor).with_material(0.5, 0.0, 0.01));
+    let on_cube = lone_particle(&mut app, Vec3::new(0.1, 1.0, 0.1), Vec3::ZERO, 1.0 / 1024.0);
+    let on_mesh = lone_particle(&mut app, Vec3::new(3.0, 1.0, 0.0), Vec3::ZERO, 1.0 / 1024.0);
+    for _ in 0..192 {
+        app.update();
+    }
+    let (a, b) = (
+        particles_of(&app, on_cube)[0],
+        particles_of(&app, on_mesh)[0],
+    );
+    println!(
+        "resting on the cuboid at y = {:.4}, on the trimesh at y = {:.4}",
+        a.y, b.y
+    );
+    assert!((a.y - 0.51).abs() < 2e-3, "{a}");
+    assert!((b.y - 0.26).abs() < 2e-3, "{b}");
+}
+
+#[test]
+fn scene_files_spawn_and_bad_files_name_themselves() {
+    let dir = std::env::temp_dir().join(format!("bsb_plugin_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let good = dir.join("chain.json");
+    std::fs::write(&good, chain_scene().to_json()).unwrap();
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, "{ \"particles\": [ { \"mass\": -1 } ] }").unwrap();
+    let mut app = app();
+    let (g, b) = (good.clone(), bad.clone());
+    let (ok, err) = app
+        .world_mut()
+        .run_system_once(move |mut c: Commands| {
+            (
+                c.spawn_soft_body_file(&g, SoftBody::default()),
+                c.spawn_soft_body_file(&b, SoftBody::default()),
+            )
+        })
+        .unwrap();
+    let e = ok.unwrap();
+    let err = err.unwrap_err().to_string();
+    println!("{err}");
+    assert!(err.contains("bad.json"), "{err}");
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(status(&app, e).particles, 5);
+    assert_eq!(frames(&app, e), 10);
 }
 
 #[test]

@@ -117,6 +117,8 @@ pub struct BodySim {
     follow: Vec<(u32, Entity, Vec3, Vec3)>,
     /// Pinned-in-place particle indices (editing their position moves the pin).
     fixed_pins: Vec<u32>,
+    /// Positions before the last fixed step (kept only while interpolated drawing is on).
+    prev_x: Vec<Vec3>,
     problem: Option<String>,
     diverged: Option<Divergence>,
     report: bool,
@@ -132,6 +134,11 @@ impl BodySim {
     /// The particle entity of each packed index.
     pub fn particle_entities(&self) -> &[Entity] {
         &self.particles
+    }
+
+    /// Positions before the last fixed step (empty unless interpolated drawing is on).
+    pub fn previous_positions(&self) -> &[Vec3] {
+        &self.prev_x
     }
 }
 
@@ -560,6 +567,7 @@ fn prepare(
 
 fn step(
     clock: Res<SoftBodyClock>,
+    debug: Res<crate::render::SoftBodyDebug>,
     mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
 ) {
     if !clock.running() {
@@ -576,6 +584,10 @@ fn step(
             if body.paused {
                 status.state = BodyState::Paused;
                 return;
+            }
+            bs.prev_x.clear();
+            if debug.interpolate {
+                bs.prev_x.extend(sim.state.x.iter().map(|x| to_f32(*x)));
             }
             let start = std::time::Instant::now();
             match sim.advance_frame() {

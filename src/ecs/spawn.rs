@@ -18,6 +18,29 @@ pub trait SpawnSoftBody {
     /// Particles on a prescribed path follow a target entity moved by [`ScriptedMotion`].
     /// Returns the root, or the scene's validation errors (every bad field, with its path).
     fn spawn_soft_body(&mut self, scene: &Scene, body: SoftBody) -> Result<Entity, SceneError>;
+
+    /// Reads a scene JSON file and spawns it (see [`SpawnSoftBody::spawn_soft_body`]). An
+    /// unreadable file or invalid JSON is an error naming the file (and the field or line).
+    fn spawn_soft_body_file(
+        &mut self,
+        path: impl AsRef<std::path::Path>,
+        body: SoftBody,
+    ) -> Result<Entity, SceneError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+            errors: vec![crate::core::scene::FieldError {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            }],
+        })?;
+        let scene = Scene::from_json(&text).map_err(|mut e| {
+            for f in &mut e.errors {
+                f.path = format!("{}: {}", path.display(), f.path);
+            }
+            e
+        })?;
+        self.spawn_soft_body(&scene, body)
+    }
 }
 
 impl SpawnSoftBody for Commands<'_, '_> {

@@ -45,6 +45,10 @@ pub struct SoftBodyDebug {
     /// Give colliders without a mesh one of their shape (balls, ground planes, cuboids,
     /// capsules), when the app renders.
     pub show_colliders: bool,
+    /// Draw meshes and gizmos between the last two fixed steps, by the fixed clock's overstep
+    /// (smooth motion at any frame rate, one fixed step behind). Off: the last step exactly.
+    /// Particle components and `Transform`s always hold the exact last step.
+    pub interpolate: bool,
 }
 
 impl Default for SoftBodyDebug {
@@ -53,6 +57,7 @@ impl Default for SoftBodyDebug {
             wireframe: false,
             particle_radius: 0.02,
             show_colliders: true,
+            interpolate: false,
         }
     }
 }
@@ -93,8 +98,29 @@ type SurfaceItem<'a> = (
     Has<MeshMaterial3d<StandardMaterial>>,
 );
 
+/// The positions to draw: the last fixed step's, or (interpolating) between the last two.
+fn drawn_positions(bs: &BodySim, alpha: Option<f32>) -> Vec<Vec3> {
+    let Some(sim) = bs.simulation() else {
+        return vec![];
+    };
+    let cur = sim.state.x.iter().map(|x| to_f32(*x));
+    match alpha {
+        Some(a) if bs.previous_positions().len() == sim.state.x.len() => cur
+            .zip(bs.previous_positions())
+            .map(|(c, p)| p.lerp(c, a))
+            .collect(),
+        _ => cur.collect(),
+    }
+}
+
+fn alpha(debug: &SoftBodyDebug, fixed: &Time<Fixed>) -> Option<f32> {
+    debug.interpolate.then(|| fixed.overstep_fraction())
+}
+
 fn sync_surfaces(
     mut commands: Commands,
+    debug: Res<SoftBodyDebug>,
+    fixed: Res<Time<Fixed>>,
     meshes: Option<ResMut<Assets<Mesh>>>,
     materials: Option<ResMut<Assets<StandardMaterial>>>,
     q: Query<SurfaceItem>,
@@ -107,7 +133,10 @@ fn sync_surfaces(
         if !sim.state.is_finite() || surface.triangles.iter().flatten().any(|&i| i as usize >= n) {
             continue;
         }
-        let positions: Vec<[f32; 3]> = sim.state.x.iter().map(|x| to_f32(*x).to_array()).collect();
+        let positions: Vec<[f32; 3]> = drawn_positions(bs, alpha(&debug, &fixed))
+            .into_iter()
+            .map(|p| p.to_array())
+            .collect();
         if let Some(m) = mesh3d {
             if let Some(mut mesh) = meshes.get_mut(&m.0) {
                 if let Some(VertexAttributeValues::Float32x3(p)) =
@@ -156,6 +185,7 @@ fn sync_surfaces(
 
 fn draw_gizmos(
     debug: Res<SoftBodyDebug>,
+    fixed: Res<Time<Fixed>>,
     mut gizmos: Gizmos,
     q: Query<(&BodySim, Has<SoftBodySurface>)>,
 ) {
@@ -164,21 +194,17 @@ fn draw_gizmos(
         if has_surface && !debug.wireframe {
             continue;
         }
-        let x = &sim.state.x;
         if !sim.state.is_finite() {
             continue;
         }
+        let x = drawn_positions(bs, alpha(&debug, &fixed));
         for s in sim.system.springs.as_slice() {
-            gizmos.line(
-                to_f32(x[s.i as usize]),
-                to_f32(x[s.j as usize]),
-                Color::srgb(0.9, 0.9, 0.5),
-            );
+            gizmos.line(x[s.i as usize], x[s.j as usize], Color::srgb(0.9, 0.9, 0.5));
         }
         if !has_surface {
-            for p in x {
+            for p in &x {
                 gizmos.sphere(
-                    Isometry3d::from_translation(to_f32(*p)),
+                    Isometry3d::from_translation(*p),
                     debug.particle_radius,
                     Color::srgb(0.3, 0.7, 1.0),
                 );

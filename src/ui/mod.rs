@@ -287,6 +287,7 @@ fn panel(
                     ui_state.history.clear();
                 }
                 ui.checkbox(&mut debug.wireframe, "wireframe");
+                ui.checkbox(&mut debug.interpolate, "interpolate");
             });
             ui.label(format!(
                 "t = {:.2} s   precision {}",
