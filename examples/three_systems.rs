@@ -20,16 +20,14 @@ fn main() {
     let chain = build::chain(&build::ChainParams::default())
         .expect("valid chain")
         .translated([-0.4, 1.0, 0.0]);
-    let base = build::ClothParams {
-        k_structural: 400.0,
-        k_shear: 200.0,
-        k_flex: 80.0,
-        damping: 0.1,
-        ..Default::default()
-    };
-    let cloth = build::cloth_sphere(&base.resized(24, 24), 0.25, 0.6, 4.0)
-        .expect("valid cloth")
-        .translated([1.8, 0.0, 0.0]);
+    let cloth = build::cloth_sphere(
+        &common::stiff_cloth(args.size.unwrap_or(24)),
+        0.25,
+        0.6,
+        4.0,
+    )
+    .expect("valid cloth")
+    .translated([1.8, 0.0, 0.0]);
     let body = args.body(IntegratorKind::Rk4, 0.0025);
     let mut app = common::app("three systems", &args);
     let circle_kind = if kind.is_implicit() {

@@ -1,7 +1,8 @@
 //! What every windowed example shares: the App (window, `SoftBodyPlugin`, the
 //! `SoftBodyUiPlugin` panel and keys, 60 Hz fixed step), lights, an orbit camera, the
-//! `LETTER H` arguments of the classic sample solution and `--screenshot FILE [--frames N]`
-//! (N frames of exactly 1/60 s, then a PNG, then exit). Not an example itself.
+//! `LETTER H` arguments of the classic sample solution, `--size N` for the cloth examples and
+//! `--screenshot FILE [--frames N]` (N frames of exactly 1/60 s, default 150, then a PNG,
+//! then exit). Not an example itself.
 
 #![allow(dead_code)]
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
@@ -11,12 +12,14 @@ use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 use bevy_soft_body::prelude::*;
 
-/// Command line: `[LETTER [H]] [--screenshot FILE] [--frames N]`.
+/// Command line: `[LETTER [H]] [--size N] [--screenshot FILE] [--frames N]`.
 pub struct Args {
     /// Integrator, when given.
     pub integrator: Option<IntegratorKind>,
     /// Step size, when given.
     pub h: Option<f64>,
+    /// Cloth resolution, when given (3 to 256).
+    pub size: Option<usize>,
     screenshot: Option<String>,
     frames: u32,
 }
@@ -26,12 +29,15 @@ pub fn args(usage: &str) -> Args {
     let mut a = Args {
         integrator: None,
         h: None,
+        size: None,
         screenshot: None,
-        frames: 180,
+        frames: 150,
     };
     let mut it = std::env::args().skip(1);
     let fail = |e: String| -> ! {
-        eprintln!("error: {e}\nusage: {usage} [LETTER [H]] [--screenshot FILE [--frames N]]");
+        eprintln!(
+            "error: {e}\nusage: {usage} [LETTER [H]] [--size N] [--screenshot FILE [--frames N]]"
+        );
         std::process::exit(1)
     };
     while let Some(arg) = it.next() {
@@ -41,6 +47,16 @@ pub fn args(usage: &str) -> Args {
                     it.next()
                         .unwrap_or_else(|| fail("--screenshot needs a file".into())),
                 )
+            }
+            "--size" => {
+                let n = it
+                    .next()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or_else(|| fail("--size needs a count".into()));
+                if !(3..=256).contains(&n) {
+                    fail(format!("--size must be between 3 and 256, got {n}"));
+                }
+                a.size = Some(n);
             }
             "--frames" => {
                 a.frames = it
@@ -119,6 +135,33 @@ pub fn app(title: &str, args: &Args) -> App {
 
 /// A key light with shadows, a fill light and an orbit camera looking at `target`.
 pub fn stage(commands: &mut Commands, target: Vec3, distance: f32) {
+    stage_with(
+        commands,
+        OrbitCamera {
+            target,
+            yaw: 0.5,
+            pitch: 0.25,
+            distance,
+        },
+    );
+}
+
+/// The cloth of `cloth_sphere` and `three_systems`: 4× stiffer than the 16×16 reference, so
+/// it stretches little when held by two corners; at 32×32 its fastest mode has h ω ≈ 2.4 at
+/// h = 0.0025 (RK4's bound is 2.83).
+pub fn stiff_cloth(size: usize) -> build::ClothParams {
+    build::ClothParams {
+        k_structural: 400.0,
+        k_shear: 200.0,
+        k_flex: 80.0,
+        damping: 0.1,
+        ..Default::default()
+    }
+    .resized(size, size)
+}
+
+/// The lights and the given orbit camera.
+pub fn stage_with(commands: &mut Commands, camera: OrbitCamera) {
     commands.spawn((
         DirectionalLight {
             illuminance: 9000.0,
@@ -135,12 +178,7 @@ pub fn stage(commands: &mut Commands, target: Vec3, distance: f32) {
         },
         Transform::from_xyz(-2.5, 2.5, -2.0),
     ));
-    commands.spawn(OrbitCamera {
-        target,
-        yaw: 0.5,
-        pitch: 0.25,
-        distance,
-    });
+    commands.spawn(camera);
 }
 
 fn screenshot(

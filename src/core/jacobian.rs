@@ -119,6 +119,15 @@ impl ParticleModel {
     pub fn linear_drag(&self) -> Scalar {
         self.drag + self.wind_coefficient()
     }
+
+    /// Sets every diagonal block of `a` to `(m + h c) I`: mass plus `h` times the drag
+    /// Jacobian, the part every implicit matrix starts from.
+    fn fill_mass_diagonal(&self, h: Scalar, a: &mut SpringMatrix) {
+        let c = self.linear_drag();
+        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
+            *d = Matrix3::IDENTITY * (*m + h * c);
+        }
+    }
 }
 
 /// What implicit integrators need of a particle system.
@@ -254,10 +263,7 @@ impl Linearization for ParticleModel {
     }
 
     fn assemble_damping(&self, state: &ParticleState, h: Scalar, a: &mut SpringMatrix) {
-        let c = self.linear_drag();
-        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
-            *d = Matrix3::IDENTITY * (*m + h * c);
-        }
+        self.fill_mass_diagonal(h, a);
         for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
             let (i, j) = (s.i as usize, s.j as usize);
             let d = state.x[i] - state.x[j];
@@ -282,11 +288,8 @@ impl Linearization for ParticleModel {
         a: &mut SpringMatrix,
         kv: &mut [Vector],
     ) {
-        let c = self.linear_drag();
-        for ((d, m), k) in a.diag.iter_mut().zip(self.mass()).zip(kv.iter_mut()) {
-            *d = Matrix3::IDENTITY * (*m + h * c);
-            *k = Vector::ZERO;
-        }
+        self.fill_mass_diagonal(h, a);
+        kv.fill(Vector::ZERO);
         let h2 = h * h;
         for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
             let (ks, ds, _) = spring_blocks(s, &state.x, &state.v, definite);
@@ -404,10 +407,7 @@ impl Linearization for ParticleModel {
         definite: bool,
         a: &mut SpringMatrix,
     ) {
-        let c = self.linear_drag();
-        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
-            *d = Matrix3::IDENTITY * (*m + h * c);
-        }
+        self.fill_mass_diagonal(h, a);
         let h2 = h * h;
         for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
             let blk = spring_stiffness(s, x, definite) * h2 + damper_block(s, x0) * h;

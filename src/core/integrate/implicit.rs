@@ -7,14 +7,16 @@ use crate::core::solve::{LinearSolver, Pcg, PcgReport, SpringMatrix};
 use crate::math::{Scalar, Vector};
 
 /// What every implicit step starts with: the step size checked, the system's linearization
-/// and the state's particles found (or the error saying which is missing), and the matrix
-/// rebuilt when the system's structure changed.
+/// and the state's particles found (or the error saying which is missing), the matrix rebuilt
+/// when the system's structure changed, and the free-particle mask filled (a free particle
+/// without a valid mass is a reported solver failure).
 fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     kind: IntegratorKind,
     sys: &'a Sys,
     h: Scalar,
     state: &'a mut S,
     slot: &'a mut Option<SpringMatrix>,
+    mask: &mut Vec<Scalar>,
 ) -> Result<
     (
         &'a dyn Linearization,
@@ -32,6 +34,10 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
         *slot = None;
     }
     let a = slot.get_or_insert_with(|| lin.new_matrix());
+    mask.resize(lin.particles(), 0.0);
+    if !lin.free_mask(mask) {
+        return Err(StepError::SolverFailed(kind));
+    }
     Ok((lin, ps, a))
 }
 
@@ -133,16 +139,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             h,
             state,
             &mut self.a,
+            &mut self.mask,
         )?;
         let n = lin.particles();
         for v in [&mut self.f, &mut self.rhs, &mut self.v1] {
             v.resize(n, Vector::ZERO);
-        }
-        self.mask.resize(n, 0.0);
-        if !lin.free_mask(&mut self.mask) {
-            return Err(StepError::SolverFailed(
-                IntegratorKind::ImplicitDampingTrapezoid,
-            ));
         }
         lin.elastic_forces(t, ps, &mut self.f);
         lin.assemble_damping(ps, h, a);
@@ -192,16 +193,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
             h,
             state,
             &mut self.a,
+            &mut self.mask,
         )?;
         let n = lin.particles();
         for v in [&mut self.f0, &mut self.kv, &mut self.rhs, &mut self.dv] {
             v.resize(n, Vector::ZERO);
-        }
-        self.mask.resize(n, 0.0);
-        if !lin.free_mask(&mut self.mask) {
-            return Err(StepError::SolverFailed(
-                IntegratorKind::LinearlyImplicitEuler,
-            ));
         }
         lin.total_forces(t, ps, &mut self.f0);
         lin.assemble(ps, h, self.definite, a, &mut self.kv);
@@ -361,7 +357,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         state: &mut S,
     ) -> Result<Scalar, StepError> {
         let kind = IntegratorKind::BackwardEuler;
-        let (lin, ps, a) = implicit_setup(kind, sys, h, state, &mut self.a)?;
+        let (lin, ps, a) = implicit_setup(kind, sys, h, state, &mut self.a, &mut self.mask)?;
         let n = lin.particles();
         for b in [
             &mut self.x0,
@@ -373,10 +369,6 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             &mut self.vt,
         ] {
             b.resize(n, Vector::ZERO);
-        }
-        self.mask.resize(n, 0.0);
-        if !lin.free_mask(&mut self.mask) {
-            return Err(StepError::SolverFailed(kind));
         }
         self.x0.copy_from_slice(&ps.x);
         self.v0.copy_from_slice(&ps.v);
