@@ -384,7 +384,8 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
         .attribute(Mesh::ATTRIBUTE_POSITION)
         .unwrap()
         .as_float3()
-        .unwrap();
+        .unwrap()
+        .to_vec();
     let nrm = match mesh.attribute(Mesh::ATTRIBUTE_NORMAL).unwrap() {
         bevy::mesh::VertexAttributeValues::Float32x3(n) => n.clone(),
         _ => panic!("normals"),
@@ -397,6 +398,35 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
         assert!((Vec3::from_array(n).length() - 1.0).abs() < 1e-5);
     }
     assert!(app.world().get::<SoftBodySurface>(e).is_some());
+
+    // A particle added to the body (as the mouse grab does) must not freeze or shift the
+    // surface: its vertices stay tied to their particles.
+    let corner = app.world().get::<BodyParticles>(e).unwrap().entities()[0];
+    let extra = app
+        .world_mut()
+        .spawn((Particle::at(Vec3::new(0.0, 2.0, 0.0), 1.0), ParticleOf(e), Pinned::here()))
+        .id();
+    app.world_mut().spawn((
+        Spring {
+            a: corner,
+            b: extra,
+            rest_length: 0.5,
+            stiffness: 10.0,
+            damping: 0.0,
+            law: Default::default(),
+        },
+        SpringOf(e),
+    ));
+    for _ in 0..5 {
+        app.update();
+    }
+    let xs = particles_of(&app, e);
+    assert_eq!(xs.len(), pos.len() + 1);
+    let meshes = app.world().resource::<Assets<Mesh>>();
+    let now = meshes.get(&handle).unwrap().attribute(Mesh::ATTRIBUTE_POSITION).unwrap().as_float3().unwrap();
+    for (p, x) in now.iter().zip(&xs) {
+        assert_eq!(Vec3::from_array(*p), *x, "the surface stopped following its particles");
+    }
 
     // Interpolated drawing: between the last two fixed steps by the fixed clock's overstep,
     // which is exactly zero when every update runs one whole fixed step — so the mesh shows

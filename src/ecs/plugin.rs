@@ -109,6 +109,8 @@ pub struct BodySim {
     pub(crate) sim: Option<Simulation<ParticleState, ParticleModel>>,
     /// Particle entity of each packed index.
     pub(crate) particles: Vec<Entity>,
+    /// Packed index of each particle entity.
+    index: HashMap<Entity, u32>,
     /// Spring entities in the body's relationship order (the packed list may skip some).
     pub(crate) springs: Vec<Entity>,
     /// Positions and velocities as last written to the components (to tell user edits apart).
@@ -134,6 +136,11 @@ impl BodySim {
     /// The particle entity of each packed index.
     pub fn particle_entities(&self) -> &[Entity] {
         &self.particles
+    }
+
+    /// The packed index of a particle entity of this body.
+    pub fn index_of(&self, particle: Entity) -> Option<usize> {
+        self.index.get(&particle).map(|i| *i as usize)
     }
 
     /// Positions before the last fixed step (empty unless interpolated drawing is on).
@@ -233,6 +240,7 @@ type ParticleItem<'a> = (
 struct Built {
     sim: Simulation<ParticleState, ParticleModel>,
     particles: Vec<Entity>,
+    index: HashMap<Entity, u32>,
     follow: Vec<(u32, Entity, Vec3, Vec3)>,
     fixed_pins: Vec<u32>,
 }
@@ -384,6 +392,7 @@ fn build_body(
     Ok(Built {
         sim: Simulation::new(model, state, config),
         particles: ents,
+        index,
         follow,
         fixed_pins,
     })
@@ -521,6 +530,7 @@ fn prepare(
                     status.springs = b.sim.system.springs.len() as u32;
                     bs.sim = Some(b.sim);
                     bs.particles = b.particles;
+                    bs.index = b.index;
                     bs.follow = b.follow;
                     bs.fixed_pins = b.fixed_pins;
                     bs.problem = None;

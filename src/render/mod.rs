@@ -90,14 +90,6 @@ pub fn smooth_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], normals: &
     }
 }
 
-type SurfaceItem<'a> = (
-    Entity,
-    &'a SoftBodySurface,
-    &'a BodySim,
-    Option<&'a Mesh3d>,
-    Has<MeshMaterial3d<StandardMaterial>>,
-);
-
 /// The positions to draw: the last fixed step's, or (interpolating) between the last two.
 fn drawn_positions(bs: &BodySim, alpha: Option<f32>) -> Vec<Vec3> {
     let Some(sim) = bs.simulation() else {
@@ -117,6 +109,21 @@ fn alpha(debug: &SoftBodyDebug, fixed: &Time<Fixed>) -> Option<f32> {
     debug.interpolate.then(|| fixed.overstep_fraction())
 }
 
+/// Which particle entity each vertex of a body's surface mesh shows, fixed when the mesh is
+/// made, so particles added later (a mouse grab's handle) or despawned do not shift the
+/// surface: a vertex whose particle is gone keeps its last position.
+#[derive(Component, Clone, Debug)]
+pub struct SurfaceVertices(pub Vec<Entity>);
+
+type SurfaceItem<'a> = (
+    Entity,
+    &'a SoftBodySurface,
+    &'a BodySim,
+    Option<&'a Mesh3d>,
+    Option<&'a SurfaceVertices>,
+    Has<MeshMaterial3d<StandardMaterial>>,
+);
+
 fn sync_surfaces(
     mut commands: Commands,
     debug: Res<SoftBodyDebug>,
@@ -127,33 +134,45 @@ fn sync_surfaces(
 ) {
     let Some(mut meshes) = meshes else { return };
     let mut materials = materials;
-    for (e, surface, bs, mesh3d, has_material) in &q {
+    for (e, surface, bs, mesh3d, vertices, has_material) in &q {
         let Some(sim) = bs.simulation() else { continue };
-        let n = sim.state.len();
-        if !sim.state.is_finite() || surface.triangles.iter().flatten().any(|&i| i as usize >= n) {
+        if !sim.state.is_finite() {
             continue;
         }
-        let positions: Vec<[f32; 3]> = drawn_positions(bs, alpha(&debug, &fixed))
-            .into_iter()
-            .map(|p| p.to_array())
-            .collect();
-        if let Some(m) = mesh3d {
-            if let Some(mut mesh) = meshes.get_mut(&m.0) {
-                if let Some(VertexAttributeValues::Float32x3(p)) =
-                    mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
-                    && p.len() == n
-                {
-                    p.copy_from_slice(&positions);
+        let drawn = drawn_positions(bs, alpha(&debug, &fixed));
+        if let (Some(m), Some(vertices)) = (mesh3d, vertices) {
+            let Some(mut mesh) = meshes.get_mut(&m.0) else {
+                continue;
+            };
+            let Some(VertexAttributeValues::Float32x3(p)) =
+                mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+            else {
+                continue;
+            };
+            for (out, v) in p.iter_mut().zip(&vertices.0) {
+                if let Some(i) = bs.index_of(*v) {
+                    *out = drawn[i].to_array();
                 }
-                if let Some(VertexAttributeValues::Float32x3(nrm)) =
-                    mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
-                    && nrm.len() == n
-                {
-                    smooth_normals(&positions, &surface.triangles, nrm);
-                }
+            }
+            let positions = p.clone();
+            if let Some(VertexAttributeValues::Float32x3(nrm)) =
+                mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
+                && nrm.len() == positions.len()
+            {
+                smooth_normals(&positions, &surface.triangles, nrm);
             }
             continue;
         }
+        // First frame: the mesh's vertices are the body's particles as they are now.
+        let n = drawn.len();
+        if surface.triangles.iter().flatten().any(|&i| i as usize >= n) {
+            warn!(
+                "soft body {e}: a surface triangle names a particle index beyond its {n} particles; not drawn"
+            );
+            commands.entity(e).remove::<SoftBodySurface>();
+            continue;
+        }
+        let positions: Vec<[f32; 3]> = drawn.iter().map(|p| p.to_array()).collect();
         let mut mesh = Mesh::new(
             PrimitiveTopology::TriangleList,
             RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
@@ -170,7 +189,10 @@ fn sync_surfaces(
         ));
         let handle = meshes.add(mesh);
         let mut ec = commands.entity(e);
-        ec.insert(Mesh3d(handle));
+        ec.insert((
+            Mesh3d(handle),
+            SurfaceVertices(bs.particle_entities().to_vec()),
+        ));
         if !has_material && let Some(materials) = materials.as_mut() {
             ec.insert(MeshMaterial3d(materials.add(StandardMaterial {
                 base_color: surface.color,
