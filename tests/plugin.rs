@@ -404,7 +404,11 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
     let corner = app.world().get::<BodyParticles>(e).unwrap().entities()[0];
     let extra = app
         .world_mut()
-        .spawn((Particle::at(Vec3::new(0.0, 2.0, 0.0), 1.0), ParticleOf(e), Pinned::here()))
+        .spawn((
+            Particle::at(Vec3::new(0.0, 2.0, 0.0), 1.0),
+            ParticleOf(e),
+            Pinned::here(),
+        ))
         .id();
     app.world_mut().spawn((
         Spring {
@@ -423,9 +427,19 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
     let xs = particles_of(&app, e);
     assert_eq!(xs.len(), pos.len() + 1);
     let meshes = app.world().resource::<Assets<Mesh>>();
-    let now = meshes.get(&handle).unwrap().attribute(Mesh::ATTRIBUTE_POSITION).unwrap().as_float3().unwrap();
+    let now = meshes
+        .get(&handle)
+        .unwrap()
+        .attribute(Mesh::ATTRIBUTE_POSITION)
+        .unwrap()
+        .as_float3()
+        .unwrap();
     for (p, x) in now.iter().zip(&xs) {
-        assert_eq!(Vec3::from_array(*p), *x, "the surface stopped following its particles");
+        assert_eq!(
+            Vec3::from_array(*p),
+            *x,
+            "the surface stopped following its particles"
+        );
     }
 
     // Interpolated drawing: between the last two fixed steps by the fixed clock's overstep,
@@ -599,4 +613,94 @@ fn bad_input_leaves_the_body_out_with_a_message_naming_the_culprit() {
             .simulation()
             .is_none()
     );
+}
+
+#[test]
+fn a_diverging_body_stops_alone_with_a_message_and_no_nan() {
+    // Forward Euler on the stiff pendulum at h = 1/64 (one step per frame; ω = √(k/μ) ≈ 64
+    // rad/s, h ω ≈ 1, and forward Euler has no stable step without damping): it must blow up,
+    // be stopped by the guard with its last good state, send `SoftBodyDiverged`, and leave
+    // the RK4 body beside it stepping.
+    let mut app = app();
+    let bad = spawn(
+        &mut app,
+        &chain_scene(),
+        SoftBody {
+            integrator: IntegratorKind::ForwardEuler,
+            step: StepPolicy::Fixed { h: FRAME },
+            ..Default::default()
+        },
+    );
+    let good = spawn(&mut app, &chain_scene(), SoftBody::default());
+    let mut sent = vec![];
+    for _ in 0..400 {
+        app.update();
+        // Messages live for two updates: collect them as they come.
+        let messages = app.world().resource::<Messages<SoftBodyDiverged>>();
+        sent.extend(messages.iter_current_update_messages().map(|m| m.body));
+    }
+    let msg = match status(&app, bad).state {
+        BodyState::Diverged(m) => m,
+        other => panic!("expected a divergence, got {other:?}"),
+    };
+    println!("{msg}");
+    assert!(msg.contains("forward Euler"), "{msg}");
+    assert_eq!(sent, vec![bad], "one SoftBodyDiverged, for that body");
+    assert!(particles_of(&app, bad).iter().all(|x| x.is_finite()));
+    assert_eq!(status(&app, good).state, BodyState::Running);
+    assert_eq!(frames(&app, good), 400);
+}
+
+#[test]
+fn runtime_edits_teleport_and_retune_on_the_next_step() {
+    let mut app = app();
+    let e = spawn(&mut app, &chain_scene(), SoftBody::default());
+    for _ in 0..10 {
+        app.update();
+    }
+    // Teleport the last particle: the next step starts from there (one step of 1/64 s moves
+    // it by about |v| / 64, far less than the 5 m jump).
+    let last = *app
+        .world()
+        .get::<BodyParticles>(e)
+        .unwrap()
+        .entities()
+        .last()
+        .unwrap();
+    let target = Vec3::new(5.0, 5.0, 0.0);
+    app.world_mut().get_mut::<Particle>(last).unwrap().position = target;
+    app.update();
+    let at = app.world().get::<Particle>(last).unwrap().position;
+    assert!(at.distance(target) < 0.5, "teleport ignored: {at}");
+    assert_eq!(status(&app, e).rebuilds, 1, "a teleport needs no rebuild");
+    // Retune a spring: the model is rebuilt with the new stiffness.
+    let spring = app.world().get::<BodySprings>(e).unwrap().entities()[0];
+    app.world_mut().get_mut::<Spring>(spring).unwrap().stiffness = 1000.0;
+    app.update();
+    let st = status(&app, e);
+    assert_eq!(st.rebuilds, 2);
+    let k = app
+        .world()
+        .get::<BodySim>(e)
+        .unwrap()
+        .simulation()
+        .unwrap()
+        .system
+        .springs
+        .as_slice()[0]
+        .k;
+    assert_eq!(k as f32, 1000.0);
+}
+
+#[test]
+fn the_plugin_runs_in_another_schedule() {
+    // `SoftBodyPlugin::new(Update)`: one step per app update, the frame still Time<Fixed>'s.
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::new(Update)))
+        .insert_resource(Time::<Fixed>::from_seconds(FRAME));
+    let e = spawn(&mut app, &chain_scene(), SoftBody::default());
+    for _ in 0..7 {
+        app.update();
+    }
+    assert_eq!(frames(&app, e), 7);
 }
