@@ -248,7 +248,8 @@ pub struct NewtonReport {
     pub fallbacks: u32,
     /// True when the iteration stopped at the round-off floor: a full Newton step (α = 1)
     /// that did not halve the gradient norm, which near a minimum happens only when the
-    /// gradient is round-off.
+    /// gradient is round-off, or an accepted step that changed the objective by round-off
+    /// only.
     pub stagnated: bool,
 }
 
@@ -483,6 +484,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                 break;
             };
             full_step = alpha == 1.0;
+            // An accepted step that changed Φ by round-off only: the minimum is resolved as
+            // far as this precision can tell.
+            if phi - trial <= 16.0 * f64::EPSILON * phi.abs() {
+                rep.stagnated = true;
+            }
             std::mem::swap(&mut self.v, &mut self.vt);
             phi = lin.incremental_potential(
                 t_end,
