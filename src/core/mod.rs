@@ -13,3 +13,4 @@ pub mod ode;
 pub mod particles;
 pub mod scene;
 pub mod solve;
+pub mod study;

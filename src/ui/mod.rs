@@ -404,6 +404,18 @@ fn panel(
                     }
                 }
             }
+            // Energy drift per simulated second over the plotted window (total energy: constant
+            // for a conservative system with an exact integrator; negative when damping or the
+            // method dissipates, positive when the method injects energy or something drives it).
+            if let (Some(a), Some(b)) = (ui_state.history.front(), ui_state.history.back())
+                && b[0] > a[0]
+            {
+                ui.label(format!(
+                    "energy drift {:+.3e} J/s over the last {:.1} s",
+                    (b[3] - a[3]) / (b[0] - a[0]),
+                    b[0] - a[0]
+                ));
+            }
             let series = |k: usize| -> PlotPoints<'static> {
                 ui_state.history.iter().map(|h| [h[0], h[k]]).collect()
             };
