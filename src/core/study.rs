@@ -299,3 +299,303 @@ pub fn measured_order(
 pub fn error_floor(reference_error: f64) -> f64 {
     (1e3 * Scalar::EPSILON as f64).max(10.0 * reference_error)
 }
+
+/// A scene of the stability study.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StabilityScene {
+    /// An 8-particle spring chain (the default material, no dampers, drag 0.01), released
+    /// horizontally.
+    Chain,
+    /// The seed's 16×16 cloth (8×8 in quick mode), hanging from two corners, with dampers.
+    Cloth,
+    /// The default 6×6×6 jelly block (4×4×4 in quick mode) in free fall, with dampers.
+    Jelly,
+}
+
+impl StabilityScene {
+    /// Every scene.
+    pub const ALL: [StabilityScene; 3] = [
+        StabilityScene::Chain,
+        StabilityScene::Cloth,
+        StabilityScene::Jelly,
+    ];
+
+    /// A short name.
+    pub fn name(self) -> &'static str {
+        match self {
+            StabilityScene::Chain => "chain",
+            StabilityScene::Cloth => "cloth",
+            StabilityScene::Jelly => "jelly",
+        }
+    }
+
+    /// The scene's model and initial state.
+    pub fn build(self, quick: bool) -> (ParticleModel, ParticleState) {
+        let scene = match self {
+            StabilityScene::Chain => build::chain(&build::ChainParams {
+                particles: 8,
+                ..Default::default()
+            }),
+            StabilityScene::Cloth => {
+                let n = if quick { 8 } else { 16 };
+                build::cloth(&build::ClothParams::default().resized(n, n))
+            }
+            StabilityScene::Jelly => {
+                let n = if quick { 4 } else { 6 };
+                let mut s = build::jelly(&build::JellyParams {
+                    size: [n, n, n],
+                    ..Default::default()
+                });
+                // Free fall: the ground's contacts are not part of the linear stability
+                // question.
+                if let Ok(s) = s.as_mut() {
+                    s.colliders.clear();
+                }
+                s
+            }
+        };
+        scene
+            .expect("built-in scene")
+            .build()
+            .expect("built-in scene is valid")
+    }
+}
+
+/// The fastest mode of a scene: its angular frequency and its modal damping rate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FastestMode {
+    /// `√λ_max` of `M⁻¹K` (rad/s).
+    pub omega: f64,
+    /// `c = φᵀ D φ / φᵀ M φ` (1/s) for the mode shape `φ`: the damping rate the dampers and
+    /// drag give that mode (`ẍ + c ẋ + ω² x = 0`), exact for proportional damping.
+    pub damping: f64,
+}
+
+/// `√λ_max` of `M⁻¹K` (rad/s): the fastest mode of the linearized spring network at `state`
+/// (pinned and prescribed particles held), by power iteration. `K` is the exact stiffness
+/// (compressed springs' indefinite part included), whose largest eigenvalue bounds explicit
+/// steps.
+pub fn omega_max(model: &ParticleModel, state: &ParticleState) -> f64 {
+    fastest_mode(model, state).omega
+}
+
+/// The fastest mode (see [`FastestMode`]) by power iteration on `M⁻¹K`.
+pub fn fastest_mode(model: &ParticleModel, state: &ParticleState) -> FastestMode {
+    use crate::core::jacobian::{Linearization, spring_stiffness};
+    let n = model.len();
+    let mut mask = vec![0.0; n];
+    model.free_mask(&mut mask);
+    // A deterministic start with every mode in it.
+    let mut v: Vec<[f64; 3]> = (0..n)
+        .map(|i| {
+            let a = (i as f64 * 0.618_033_988_75).fract() - 0.5;
+            let b = (i as f64 * 0.414_213_562_37).fract() - 0.5;
+            let c = (i as f64 * 0.732_050_807_57).fract() - 0.5;
+            [a, b, c].map(|x| x * mask[i] as f64)
+        })
+        .collect();
+    let blocks: Vec<[[f64; 3]; 3]> = model
+        .springs
+        .as_slice()
+        .iter()
+        .map(|s| {
+            let k = spring_stiffness(s, &state.x, false);
+            let mut m = [[0.0; 3]; 3];
+            for (c, col) in [k.x_axis, k.y_axis, k.z_axis].iter().enumerate() {
+                for r in 0..3 {
+                    m[r][c] = col[r] as f64;
+                }
+            }
+            m
+        })
+        .collect();
+    let mut lambda = 0.0;
+    for _ in 0..500 {
+        let mut y = vec![[0.0f64; 3]; n];
+        for (s, k) in model.springs.as_slice().iter().zip(&blocks) {
+            let (i, j) = (s.i as usize, s.j as usize);
+            let d = [v[i][0] - v[j][0], v[i][1] - v[j][1], v[i][2] - v[j][2]];
+            for r in 0..3 {
+                let f = k[r][0] * d[0] + k[r][1] * d[1] + k[r][2] * d[2];
+                y[i][r] += f;
+                y[j][r] -= f;
+            }
+        }
+        let mut norm = 0.0f64;
+        for i in 0..n {
+            let w = mask[i] as f64 / model.mass()[i] as f64;
+            for r in 0..3 {
+                y[i][r] *= w;
+                norm += y[i][r] * y[i][r];
+            }
+        }
+        let norm = norm.sqrt();
+        if norm == 0.0 {
+            return FastestMode {
+                omega: 0.0,
+                damping: 0.0,
+            };
+        }
+        let vnorm: f64 = v.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+        lambda = norm / vnorm;
+        for (vi, yi) in v.iter_mut().zip(&y) {
+            *vi = yi.map(|x| x / norm);
+        }
+    }
+    // Modal damping: Rayleigh quotient of the damping matrix (dampers b n nᵀ along each
+    // spring, drag c I on free particles) over the mass matrix, on the mode shape.
+    let (mut num, mut den) = (0.0f64, 0.0f64);
+    let drag = model.linear_drag() as f64;
+    for i in 0..n {
+        let vv: f64 = v[i].iter().map(|x| x * x).sum();
+        den += model.mass()[i] as f64 * vv;
+        num += drag * vv * mask[i] as f64;
+    }
+    for s in model.springs.as_slice() {
+        let (i, j) = (s.i as usize, s.j as usize);
+        let d = state.x[i] - state.x[j];
+        let l = d.length();
+        if l == 0.0 || s.damping == 0.0 {
+            continue;
+        }
+        let nn = d / l;
+        let rate = (0..3)
+            .map(|r| nn[r] as f64 * (v[i][r] - v[j][r]))
+            .sum::<f64>();
+        num += s.damping as f64 * rate * rate;
+    }
+    FastestMode {
+        omega: lambda.sqrt(),
+        damping: if den > 0.0 { num / den } else { 0.0 },
+    }
+}
+
+/// The linear stability bound of `kind` on the mode `ẍ + c ẋ + ω² x = 0`:
+/// symplectic Euler `2(√(1+ζ²) − ζ)/ω` with `ζ = c/2ω` (Jury's test on its 2×2 step
+/// matrix; `2/ω` undamped), RK4 the largest `h` with `|R(hλ)| ≤ 1` at `λ = −c/2 ± i√(ω² −
+/// c²/4)` for its stability polynomial `R` (`2√2/ω` undamped, where its region meets the
+/// imaginary axis); `None` for forward Euler, the explicit trapezoid and midpoint (no bound
+/// without damping: they amplify every undamped oscillation) and for implicit or adaptive
+/// methods.
+pub fn theoretical_bound_damped(kind: IntegratorKind, mode: FastestMode) -> Option<f64> {
+    let (w, c) = (mode.omega, mode.damping);
+    if w <= 0.0 {
+        return None;
+    }
+    match kind {
+        IntegratorKind::SymplecticEuler => {
+            let z = c / (2.0 * w);
+            Some(2.0 * ((1.0 + z * z).sqrt() - z) / w)
+        }
+        IntegratorKind::Rk4 => {
+            let (re, im) = (-c / 2.0, (w * w - c * c / 4.0).max(0.0).sqrt());
+            let amp = |h: f64| {
+                // R(z) = 1 + z + z²/2 + z³/6 + z⁴/24 at z = h λ (complex).
+                let (zr, zi) = (h * re, h * im);
+                let (mut pr, mut pi) = (1.0, 0.0); // z^k / k!
+                let (mut sr, mut si) = (1.0, 0.0);
+                for k in 1..=4 {
+                    let (nr, ni) = (pr * zr - pi * zi, pr * zi + pi * zr);
+                    pr = nr / k as f64;
+                    pi = ni / k as f64;
+                    sr += pr;
+                    si += pi;
+                }
+                (sr * sr + si * si).sqrt()
+            };
+            // Bisection on the first crossing of |R| = 1 (|R| < 1 just above 0 for c > 0 and
+            // tangent to 1 for c = 0, where the crossing is 2√2/ω).
+            let (mut a, mut b) = (0.5 / w, 4.0 / w);
+            if amp(b) <= 1.0 {
+                return Some(b);
+            }
+            for _ in 0..60 {
+                let m = 0.5 * (a + b);
+                if amp(m) <= 1.0 { a = m } else { b = m }
+            }
+            Some(a)
+        }
+        _ => None,
+    }
+}
+
+/// The explicit stability bound of `kind` for an undamped mode of angular frequency `omega`:
+/// `2/ω` for symplectic Euler, `2√2/ω` for RK4 (where its stability region meets the
+/// imaginary axis); `None` where there is none (forward Euler, the explicit trapezoid and
+/// midpoint amplify every undamped oscillation) or the method is implicit or adaptive.
+pub fn theoretical_bound(kind: IntegratorKind, omega: f64) -> Option<f64> {
+    match kind {
+        IntegratorKind::SymplecticEuler => Some(2.0 / omega),
+        IntegratorKind::Rk4 => Some(2.0 * std::f64::consts::SQRT_2 / omega),
+        _ => None,
+    }
+}
+
+/// True when `kind` at step `h` keeps the scene finite and its total energy within its
+/// initial value plus a tenth of its energy scale (gravity is in the potential, pins do no
+/// work, so no physical motion raises the total) over `duration` seconds.
+pub fn is_stable(
+    scene: StabilityScene,
+    kind: IntegratorKind,
+    h: f64,
+    duration: f64,
+    quick: bool,
+) -> bool {
+    let (model, state) = scene.build(quick);
+    let e0 = model.energy(0.0, &state).map_or(0.0, |e| e.total() as f64);
+    let scale = model.energy_scale(&state).unwrap_or(1.0) as f64;
+    let mut sim = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: kind,
+            policy: StepPolicy::Fixed { h },
+            frame_dt: h,
+            energy_guard: None,
+            ..Default::default()
+        },
+    );
+    let steps = (duration / h).ceil() as u64;
+    for _ in 0..steps {
+        if sim.advance_frame().is_err() {
+            return false;
+        }
+        let e = sim
+            .system
+            .energy(sim.time, &sim.state)
+            .map_or(0.0, |e| e.total() as f64);
+        if !e.is_finite() || e > e0 + 0.1 * scale {
+            return false;
+        }
+    }
+    true
+}
+
+/// The largest stable step of `kind` on `scene` by bisection between `lo` (must be stable)
+/// and `hi`, to a relative precision of 1 %; `None` when even `lo` is unstable, `Some(hi)`
+/// when `hi` is stable.
+pub fn largest_stable_h(
+    scene: StabilityScene,
+    kind: IntegratorKind,
+    lo: f64,
+    hi: f64,
+    duration: f64,
+    quick: bool,
+) -> Option<f64> {
+    if !is_stable(scene, kind, lo, duration, quick) {
+        return None;
+    }
+    if is_stable(scene, kind, hi, duration, quick) {
+        return Some(hi);
+    }
+    let (mut a, mut b) = (lo, hi);
+    while b / a > 1.01 {
+        let m = (a * b).sqrt();
+        if is_stable(scene, kind, m, duration, quick) {
+            a = m;
+        } else {
+            b = m;
+        }
+    }
+    Some(a)
+}
