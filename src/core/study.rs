@@ -422,11 +422,11 @@ pub fn fastest_mode(model: &ParticleModel, state: &ParticleState) -> FastestMode
             }
         }
         let mut norm = 0.0f64;
-        for i in 0..n {
-            let w = mask[i] as f64 / model.mass()[i] as f64;
-            for r in 0..3 {
-                y[i][r] *= w;
-                norm += y[i][r] * y[i][r];
+        for ((yi, w), m) in y.iter_mut().zip(&mask).zip(model.mass()) {
+            let w = *w as f64 / *m as f64;
+            for c in yi.iter_mut() {
+                *c *= w;
+                norm += *c * *c;
             }
         }
         let norm = norm.sqrt();
