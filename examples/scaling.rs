@@ -23,7 +23,6 @@ use bevy_soft_body::core::study;
 use bevy_soft_body::math::PRECISION;
 use plotters::prelude::*;
 use std::fmt::Write as _;
-use std::path::PathBuf;
 use std::time::Instant;
 
 fn cloth(n: usize) -> build::ClothParams {
@@ -57,30 +56,13 @@ fn bisect(n: usize, kind: IntegratorKind, lo: f64, hi: f64, t: f64) -> f64 {
     a
 }
 
+#[path = "headless/mod.rs"]
+mod headless;
+
 fn main() {
-    let mut out = PathBuf::from("target/scaling");
-    let mut sizes = vec![32usize, 64, 128];
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--out" => out = it.next().map(PathBuf::from).unwrap_or(out),
-            "--sizes" => {
-                sizes = it
-                    .next()
-                    .unwrap_or_default()
-                    .split(',')
-                    .filter_map(|s| s.parse().ok())
-                    .collect()
-            }
-            other => {
-                eprintln!(
-                    "unknown option '{other}'\nusage: scaling [--out DIR] [--sizes 32,64,128]"
-                );
-                std::process::exit(1);
-            }
-        }
-    }
-    std::fs::create_dir_all(&out).expect("output directory");
+    let args = headless::args("scaling");
+    let out = args.out;
+    let sizes = args.sizes.unwrap_or(vec![32, 64, 128]);
     let kinds: Vec<IntegratorKind> = IntegratorKind::ALL
         .into_iter()
         .filter(|k| !k.is_adaptive())
@@ -151,18 +133,7 @@ fn main() {
             .filter(|r| r.0 == kind)
             .map(|r| ((r.1 as f64).ln(), r.3.ln()))
             .collect();
-        let slope = if pts.len() >= 2 {
-            let n = pts.len() as f64;
-            let (mx, my) = pts
-                .iter()
-                .fold((0.0, 0.0), |(a, b), p| (a + p.0 / n, b + p.1 / n));
-            let (sxy, sxx) = pts.iter().fold((0.0, 0.0), |(a, b), p| {
-                (a + (p.0 - mx) * (p.1 - my), b + (p.0 - mx) * (p.0 - mx))
-            });
-            Some(sxy / sxx)
-        } else {
-            None
-        };
+        let slope = study::least_squares_slope(&pts);
         println!(
             "  {:<34} {}",
             kind.label(),
@@ -232,18 +203,8 @@ where
         .x_label_formatter(&|v| format!("{v:.0}"))
         .y_label_formatter(&|v| format!("{v:.0}"))
         .draw()?;
-    let colors = [
-        RGBColor(228, 26, 28),
-        RGBColor(55, 126, 184),
-        RGBColor(77, 175, 74),
-        RGBColor(152, 78, 163),
-        RGBColor(255, 127, 0),
-        RGBColor(247, 129, 191),
-        RGBColor(80, 80, 80),
-        RGBColor(23, 190, 207),
-    ];
     for (i, (kind, slope)) in slopes.iter().enumerate() {
-        let color = colors[i % colors.len()];
+        let color = headless::PALETTE[i % headless::PALETTE.len()];
         let pts: Vec<(f64, f64)> = rows
             .iter()
             .filter(|r| r.0 == *kind)

@@ -21,7 +21,6 @@ use bevy_soft_body::core::study::{self, StabilityScene};
 use bevy_soft_body::math::PRECISION;
 use plotters::prelude::*;
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 /// One row of the map.
 struct Row {
@@ -32,21 +31,12 @@ struct Row {
     theory: Option<f64>,
 }
 
+#[path = "headless/mod.rs"]
+mod headless;
+
 fn main() {
-    let mut quick = false;
-    let mut out = PathBuf::from("target/stability");
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--quick" => quick = true,
-            "--out" => out = it.next().map(PathBuf::from).unwrap_or(out),
-            other => {
-                eprintln!("unknown option '{other}'\nusage: stability [--quick] [--out DIR]");
-                std::process::exit(1);
-            }
-        }
-    }
-    std::fs::create_dir_all(&out).expect("output directory");
+    let args = headless::args("stability");
+    let (quick, out) = (args.quick, args.out);
     let duration = if quick { 1.0 } else { 3.0 };
     let mut rows = vec![];
     println!(

@@ -21,23 +21,14 @@ use bevy_soft_body::core::study::{self, Problem, WorkPoint};
 use bevy_soft_body::math::PRECISION;
 use plotters::prelude::*;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+#[path = "headless/mod.rs"]
+mod headless;
 
 fn main() {
-    let mut quick = false;
-    let mut out = PathBuf::from("target/work_precision");
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--quick" => quick = true,
-            "--out" => out = it.next().map(PathBuf::from).unwrap_or(out),
-            other => {
-                eprintln!("unknown option '{other}'\nusage: work_precision [--quick] [--out DIR]");
-                std::process::exit(1);
-            }
-        }
-    }
-    std::fs::create_dir_all(&out).expect("output directory");
+    let args = headless::args("work_precision");
+    let (quick, out) = (args.quick, args.out);
     let mut csv =
         String::from("precision,problem,method,h_or_tol,error,evaluations,linear_solves,seconds\n");
     for problem in Problem::ALL {
@@ -101,18 +92,6 @@ fn main() {
     std::fs::write(&csv_path, csv).expect("write CSV");
     println!("\nwrote {} and the charts beside it", csv_path.display());
 }
-
-const COLORS: [RGBColor; 9] = [
-    RGBColor(228, 26, 28),
-    RGBColor(55, 126, 184),
-    RGBColor(77, 175, 74),
-    RGBColor(152, 78, 163),
-    RGBColor(255, 127, 0),
-    RGBColor(166, 86, 40),
-    RGBColor(247, 129, 191),
-    RGBColor(80, 80, 80),
-    RGBColor(23, 190, 207),
-];
 
 /// What the x axis measures.
 #[derive(Clone, Copy)]
@@ -225,7 +204,7 @@ where
             if pts.is_empty() {
                 continue;
             }
-            let color = COLORS[i % COLORS.len()];
+            let color = headless::PALETTE[i % headless::PALETTE.len()];
             let order = orders
                 .iter()
                 .find(|o| o.0 == *kind)

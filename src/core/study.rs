@@ -284,13 +284,18 @@ pub fn measured_order(
     if xy.len() < 3 {
         return None;
     }
+    least_squares_slope(&xy)
+}
+
+/// The least-squares slope of `y` against `x` (`None` with fewer than two distinct `x`).
+pub fn least_squares_slope(xy: &[(f64, f64)]) -> Option<f64> {
     let n = xy.len() as f64;
     let (sx, sy) = xy.iter().fold((0.0, 0.0), |(a, b), (x, y)| (a + x, b + y));
     let (mx, my) = (sx / n, sy / n);
     let (sxy, sxx) = xy.iter().fold((0.0, 0.0), |(a, b), (x, y)| {
         (a + (x - mx) * (y - my), b + (x - mx) * (x - mx))
     });
-    Some(sxy / sxx)
+    (sxx > 0.0).then(|| sxy / sxx)
 }
 
 /// The error floor of a problem: what accumulated round-off of the precision in use reaches
