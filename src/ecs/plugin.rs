@@ -313,19 +313,28 @@ fn build_body(
             model.set_external_force(i, from_f32(f.0));
         }
     }
+    // The entity behind each packed spring, to name it in errors.
+    let mut packed_springs = Vec::with_capacity(spring_list.len());
     for &se in spring_list {
         let Ok(s) = springs.get(se) else {
             continue;
         };
         match (index.get(&s.a), index.get(&s.b)) {
-            (Some(&a), Some(&b)) => model.springs.push(
-                a as usize,
-                b as usize,
-                s.rest_length as Scalar,
-                s.stiffness as Scalar,
-                s.damping as Scalar,
-                s.law,
+            (Some(&a), Some(&b)) if a == b => warn!(
+                "soft body {body_e}: spring {se} joins particle {} to itself; the spring is left out",
+                s.a
             ),
+            (Some(&a), Some(&b)) => {
+                model.springs.push(
+                    a as usize,
+                    b as usize,
+                    s.rest_length as Scalar,
+                    s.stiffness as Scalar,
+                    s.damping as Scalar,
+                    s.law,
+                );
+                packed_springs.push(se);
+            }
             _ => warn!(
                 "soft body {body_e}: spring {se} joins {} and {}, which are not both particles of this body; the spring is left out",
                 s.a, s.b
@@ -337,17 +346,7 @@ fn build_body(
     model.set_wind(wind.map(Into::into));
     if let Err(e) = model.validate() {
         // Name the entity behind the packed index.
-        let spring_entity = |k: usize| {
-            spring_list
-                .iter()
-                .filter(|se| {
-                    springs
-                        .get(**se)
-                        .is_ok_and(|s| index.contains_key(&s.a) && index.contains_key(&s.b))
-                })
-                .nth(k)
-                .copied()
-        };
+        let spring_entity = |k: usize| packed_springs.get(k).copied();
         return Err(match e {
             ModelError::BadMass { particle, mass } => format!(
                 "particle {}: mass {mass} must be positive and finite unless the particle is pinned",
