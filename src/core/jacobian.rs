@@ -99,6 +99,20 @@ impl ParticleModel {
                 }
             }
         };
+        if !self.tets.is_empty() {
+            let n = self.len();
+            let mut diag = vec![Matrix3::ZERO; n];
+            let mut off = vec![Matrix3::ZERO; self.tets.edges().len()];
+            self.tets
+                .add_stiffness(&state.x, 1.0, false, &mut diag, &mut off, None);
+            for (i, b) in diag.iter().enumerate() {
+                add(&mut jx, i, i, b, -1.0);
+            }
+            for (o, &(i, j)) in off.iter().zip(self.tets.edges()) {
+                add(&mut jx, i as usize, j as usize, o, -1.0);
+                add(&mut jx, j as usize, i as usize, &o.transpose(), -1.0);
+            }
+        }
         for s in self.springs.as_slice() {
             let (ks, ds, gs) = spring_blocks(s, &state.x, &state.v, false);
             let (i, j) = (s.i as usize, s.j as usize);
@@ -113,6 +127,36 @@ impl ParticleModel {
             row[r] -= c as f64;
         }
         (jx, jv)
+    }
+
+    /// Off-diagonal structure of implicit matrices: each spring, then each tet edge.
+    fn matrix_pairs(&self) -> impl ExactSizeIterator<Item = (u32, u32)> + '_ {
+        self.springs
+            .as_slice()
+            .iter()
+            .map(|s| (s.i, s.j))
+            .chain(self.tets.edges().iter().copied())
+            .collect::<Vec<_>>()
+            .into_iter()
+    }
+
+    /// Adds `scale K_tets(x)` (and, with `product`, `kv −= K_tets v`) into the tet part of `a`
+    /// (its off-diagonal blocks after the springs'), zeroing that part first.
+    fn add_tet_stiffness(
+        &self,
+        x: &[Vector],
+        scale: Scalar,
+        project: bool,
+        a: &mut SpringMatrix,
+        product: Option<(&[Vector], &mut [Vector])>,
+    ) {
+        if self.tets.is_empty() {
+            return;
+        }
+        let off = &mut a.off[self.springs.len()..];
+        off.fill(Matrix3::ZERO);
+        self.tets
+            .add_stiffness(x, scale, project, &mut a.diag, off, product);
     }
 
     /// Total linear drag coefficient (drag plus wind's air drag).
@@ -206,11 +250,17 @@ impl Linearization for ParticleModel {
     }
 
     fn new_matrix(&self) -> SpringMatrix {
-        SpringMatrix::new(self.len(), &self.springs)
+        if self.tets.is_empty() {
+            return SpringMatrix::new(self.len(), &self.springs);
+        }
+        SpringMatrix::with_pairs(self.len(), self.matrix_pairs().collect())
     }
 
     fn matrix_matches(&self, a: &SpringMatrix) -> bool {
-        a.matches(self.len(), &self.springs)
+        if self.tets.is_empty() {
+            return a.matches(self.len(), &self.springs);
+        }
+        a.matches_pairs(self.len(), self.matrix_pairs())
     }
 
     fn masses(&self) -> &[Scalar] {
@@ -245,6 +295,9 @@ impl Linearization for ParticleModel {
         if !self.springs.is_empty() {
             self.springs.accumulate_elastic(&state.x, f);
         }
+        if !self.tets.is_empty() {
+            self.tets.accumulate(&state.x, f);
+        }
         let wc = self.wind_coefficient();
         let push = if wc > 0.0 {
             self.wind_velocity(t) * wc
@@ -278,6 +331,7 @@ impl Linearization for ParticleModel {
             a.diag[j] += blk;
             *o = -blk;
         }
+        a.off[self.springs.len()..].fill(Matrix3::ZERO);
     }
 
     fn assemble(
@@ -303,6 +357,7 @@ impl Linearization for ParticleModel {
             kv[i] -= kvr;
             kv[j] += kvr;
         }
+        self.add_tet_stiffness(&state.x, h2, definite, a, Some((&state.v, kv)));
     }
 
     fn constrained_velocities(&self, t_end: Scalar, h: Scalar, x0: &[Vector], v: &mut [Vector]) {
@@ -341,8 +396,19 @@ impl Linearization for ParticleModel {
             if !self.springs.is_empty() {
                 self.springs.accumulate_elastic(x, g);
             }
+            if !self.tets.is_empty() {
+                self.tets.accumulate(x, g);
+            }
             for gi in g.iter_mut() {
                 *gi *= -h;
+            }
+        }
+        if !self.tets.is_empty() {
+            // A barrier: a step that inverts or flattens an element has infinite energy, so
+            // the line search shrinks it.
+            phi += self.tets.barrier_energy(x);
+            if phi == f64::INFINITY {
+                return phi;
             }
         }
         let c = self.linear_drag();
@@ -416,5 +482,6 @@ impl Linearization for ParticleModel {
             a.diag[j] += blk;
             *o = -blk;
         }
+        self.add_tet_stiffness(x, h2, definite, a, None);
     }
 }

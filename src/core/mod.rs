@@ -5,6 +5,7 @@
 pub mod build;
 pub mod collide;
 pub mod driver;
+pub mod fem;
 pub mod forces;
 pub mod integrate;
 pub mod jacobian;

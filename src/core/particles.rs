@@ -6,6 +6,7 @@
 
 use crate::core::collide::Collider;
 use crate::core::driver::CflLimit;
+use crate::core::fem::Tets;
 use crate::core::forces::{Springs, Wind, WindField};
 use crate::core::motion::Motion;
 use crate::core::ode::{Energy, OdeSystem, ParticleState};
@@ -31,6 +32,8 @@ pub struct ParticleModel {
     prescribed: Vec<(u32, Motion)>,
     /// Springs and spring dampers.
     pub springs: Springs,
+    /// Linear tetrahedra (finite elements).
+    pub tets: Tets,
     /// Gravitational acceleration (zero: no gravity term is evaluated).
     pub gravity: Vector,
     /// Viscous drag `−k v` on every free particle (zero: skipped).
@@ -268,6 +271,11 @@ impl ParticleModel {
                 });
             }
         }
+        if self.tets.bound() > n {
+            return Err(ModelError::ParticleOutOfRange {
+                particle: self.tets.bound() - 1,
+            });
+        }
         for &(p, x) in &self.pinned {
             if p as usize >= n {
                 return Err(ModelError::ParticleOutOfRange {
@@ -312,6 +320,9 @@ impl ParticleModel {
         if !self.springs.is_empty() {
             self.springs.accumulate(&state.x, &state.v, f);
         }
+        if !self.tets.is_empty() {
+            self.tets.accumulate(&state.x, f);
+        }
         let wind_c = self.wind.as_ref().map_or(0.0, |(_, w)| w.coefficient());
         let c = self.drag + wind_c;
         if c != 0.0 {
@@ -328,6 +339,15 @@ impl ParticleModel {
                 *fi += *e;
             }
         }
+    }
+
+    /// Elastic energy of springs and tets.
+    pub fn elastic_energy(&self, x: &[Vector]) -> Scalar {
+        let mut e = self.springs.energy(x);
+        if !self.tets.is_empty() {
+            e += self.tets.energy(x) as Scalar;
+        }
+        e
     }
 
     /// Smallest explicit step bound over the springs: `min(√(μ/k), μ/b)` with `μ` the reduced
@@ -415,7 +435,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
                 }
             }
         }
-        potential += self.springs.energy(&state.x);
+        potential += self.elastic_energy(&state.x);
         if let Some(ext) = &self.external {
             for (i, e) in ext.iter().enumerate() {
                 if self.inv_mass[i] > 0.0 {
@@ -454,7 +474,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
         } else {
             0.0
         };
-        (k - k_cm).max(0.0) + self.springs.energy(&state.x)
+        (k - k_cm).max(0.0) + self.elastic_energy(&state.x)
     }
 
     /// Kinetic plus elastic energy now, plus the work gravity and external forces could do
@@ -489,7 +509,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
             })
             .sum();
         let e = self.kinetic_energy(state)
-            + self.springs.energy(&state.x)
+            + self.elastic_energy(&state.x)
             + (total_mass * self.gravity.length() + ext) * reach
             + wind
             + motion;
@@ -497,11 +517,15 @@ impl OdeSystem<ParticleState> for ParticleModel {
     }
 
     fn time_scale(&self) -> Option<Scalar> {
-        self.spring_time_scale()
+        self.cfl_time_scale(CflLimit::Oscillation)
     }
 
     fn cfl_time_scale(&self, limit: CflLimit) -> Option<Scalar> {
-        self.spring_bound(limit)
+        let s = self.spring_bound(limit);
+        match (s, self.tets.time_scale(&self.mass, &self.inv_mass)) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {

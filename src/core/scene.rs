@@ -3,6 +3,7 @@
 //! as `f64` whatever the crate's precision, so a JSON round trip is exact.
 
 use crate::core::collide::{Collider, ColliderDesc};
+use crate::core::fem::NeoHookean;
 use crate::core::forces::{SpringLaw, Wind};
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
@@ -84,6 +85,19 @@ pub struct ForceDesc {
     pub force: [f64; 3],
 }
 
+/// One linear tetrahedron of neo-Hookean material. Its rest shape is the initial positions
+/// of its four particles, which must have positive volume
+/// (`dot(b − a, (c − a) × (d − a)) > 0`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TetDesc {
+    /// Particle indices.
+    pub vertices: [usize; 4],
+    /// Its own material; the scene's `material` when absent.
+    #[serde(default)]
+    pub material: Option<NeoHookean>,
+}
+
 /// A surface to draw: triangles over particle indices, with optional texture coordinates
 /// (one per particle).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -114,6 +128,12 @@ pub struct Scene {
     /// Springs.
     #[serde(default)]
     pub springs: Vec<SpringDesc>,
+    /// Linear tetrahedra (volumetric finite elements).
+    #[serde(default)]
+    pub tets: Vec<TetDesc>,
+    /// Material of tets without their own.
+    #[serde(default)]
+    pub material: Option<NeoHookean>,
     /// Particles with prescribed motion.
     #[serde(default)]
     pub motions: Vec<MotionDesc>,
@@ -311,6 +331,39 @@ impl Scene {
                 _ => {}
             }
         }
+        if self.tets.len() > MAX_SPRINGS {
+            err(
+                "tets".into(),
+                &format!("more than the limit of {MAX_SPRINGS} tets"),
+            );
+        }
+        if let Some(Err(m)) = self.material.map(|m| m.validate()) {
+            err("material".into(), m);
+        }
+        for (k, t) in self.tets.iter().enumerate() {
+            if t.vertices.iter().any(|&i| i >= n) {
+                err(format!("tets[{k}].vertices"), "index out of range");
+                continue;
+            }
+            match t.material.or(self.material) {
+                None => err(
+                    format!("tets[{k}].material"),
+                    "no material: give the tet or the scene one",
+                ),
+                Some(m) => {
+                    if let (Err(e), Some(_)) = (m.validate(), t.material) {
+                        err(format!("tets[{k}].material"), e);
+                    }
+                }
+            }
+            let x = t
+                .vertices
+                .map(|i| glam::DVec3::from_array(self.particles[i].position));
+            let mut shape = crate::core::fem::Tets::new();
+            if let Err(e) = shape.push(t.vertices, x, &NeoHookean::default()) {
+                err(format!("tets[{k}]"), &e.to_string());
+            }
+        }
         for (k, f) in self.forces.iter().enumerate() {
             if f.particle >= n {
                 err(format!("forces[{k}].particle"), "index out of range");
@@ -443,6 +496,14 @@ impl Scene {
                 sc(s.damping),
                 s.law,
             );
+        }
+        for t in &self.tets {
+            let x = t
+                .vertices
+                .map(|i| glam::DVec3::from_array(self.particles[i].position));
+            let m = t.material.or(self.material).unwrap_or_default();
+            // Validated above: cannot fail.
+            let _ = model.tets.push(t.vertices, x, &m);
         }
         model.gravity = vec3(self.gravity);
         model.drag = sc(self.drag);

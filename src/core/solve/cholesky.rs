@@ -177,9 +177,15 @@ impl SparseCholesky {
                 } else {
                     let (p, q) = (3 * ci.min(cj) as usize, 3 * ci.max(cj) as usize);
                     let mut out = [0u32; 9];
+                    // The block is A_ij (row i); the upper triangle holds the block at row
+                    // min(i, j), which is its transpose when i is the larger.
                     for c in 0..3 {
                         for r in 0..3 {
-                            out[3 * c + r] = pos((q + c, p + r));
+                            out[3 * c + r] = if ci < cj {
+                                pos((q + c, p + r))
+                            } else {
+                                pos((q + r, p + c))
+                            };
                         }
                     }
                     OffSlot::Off(out)

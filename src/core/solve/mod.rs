@@ -10,9 +10,10 @@ use crate::core::forces::Springs;
 use crate::math::{Matrix3, Scalar, Vector};
 
 /// A symmetric matrix of 3×3 blocks: one diagonal block per particle and one off-diagonal block
-/// per spring, used at both `(i, j)` and `(j, i)` (each block is itself symmetric, so the
-/// matrix is). The structure is the spring list, built once per topology; the values are
-/// refilled every step.
+/// per pair `(i, j)` — each spring, then each tet edge — stored as the block at row `i`,
+/// column `j` and used transposed at `(j, i)` (a spring's block is itself symmetric; a tet
+/// edge's need not be). The structure is built once per topology; the values are refilled
+/// every step.
 #[derive(Clone, Debug, Default)]
 pub struct SpringMatrix {
     /// Diagonal blocks.
@@ -30,6 +31,26 @@ impl SpringMatrix {
             off: vec![Matrix3::ZERO; springs.len()],
             pairs: springs.as_slice().iter().map(|s| (s.i, s.j)).collect(),
         }
+    }
+
+    /// A zero matrix for `n` particles with off-diagonal blocks at `pairs`.
+    pub fn with_pairs(n: usize, pairs: Vec<(u32, u32)>) -> Self {
+        Self {
+            diag: vec![Matrix3::ZERO; n],
+            off: vec![Matrix3::ZERO; pairs.len()],
+            pairs,
+        }
+    }
+
+    /// True when this matrix has `n` block rows and off-diagonal blocks at `pairs`.
+    pub fn matches_pairs(
+        &self,
+        n: usize,
+        pairs: impl ExactSizeIterator<Item = (u32, u32)>,
+    ) -> bool {
+        self.diag.len() == n
+            && self.pairs.len() == pairs.len()
+            && self.pairs.iter().copied().eq(pairs)
     }
 
     /// True when this matrix has the structure of `springs` over `n` particles.
@@ -66,7 +87,9 @@ impl SpringMatrix {
         for (o, &(i, j)) in self.off.iter().zip(&self.pairs) {
             let (i, j) = (i as usize, j as usize);
             y[i] += *o * x[j];
-            y[j] += *o * x[i];
+            // (oᵀ x_i)_k = col_k · x_i
+            let xi = x[i];
+            y[j] += Vector::new(o.x_axis.dot(xi), o.y_axis.dot(xi), o.z_axis.dot(xi));
         }
     }
 
@@ -86,7 +109,7 @@ impl SpringMatrix {
         }
         for (o, &(i, j)) in self.off.iter().zip(&self.pairs) {
             put(i as usize, j as usize, o);
-            put(j as usize, i as usize, o);
+            put(j as usize, i as usize, &o.transpose());
         }
         a
     }
