@@ -179,6 +179,7 @@ fn config(a: &Args) -> DriverConfig {
             atol: a.atol,
             ..Default::default()
         },
+        solver: Default::default(),
         energy_guard: if a.guard { Some(100.0) } else { None },
     }
 }

@@ -29,6 +29,8 @@
 // needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+#[cfg(feature = "plugin")]
+pub mod assets;
 pub mod core;
 #[cfg(feature = "plugin")]
 pub mod ecs;
@@ -45,7 +47,10 @@ pub mod prelude {
     pub use crate::core::driver::{
         CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
     };
+    pub use crate::core::fem::NeoHookean;
+    pub use crate::core::fem::mesh::TetMesh;
     pub use crate::core::forces::{SpringLaw, Wind};
+    pub use crate::core::integrate::SolverChoice;
     pub use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, StepError};
     pub use crate::core::motion::Motion;
     pub use crate::core::ode::{CircleSystem, Energy, OdeState, OdeSystem, ParticleState};
@@ -54,14 +59,17 @@ pub mod prelude {
     pub use crate::math::{PRECISION, Scalar, Vector};
 
     #[cfg(feature = "plugin")]
+    pub use crate::assets::TetMeshAsset;
+    #[cfg(feature = "plugin")]
     pub use crate::ecs::{
-        BodyParticles, BodySprings, BodyState, ExternalForce, GlobalWind, Particle, ParticleOf,
-        Pinned, ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider,
-        SoftBodyDiverged, SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodySet,
-        SoftBodyStatus, SoftBodyWind, SpawnSoftBody, Spring, SpringOf,
+        BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
+        GlobalWind, LinearSolverChoice, Particle, ParticleOf, Pinned, ResetSoftBodies,
+        ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider, SoftBodyDiverged,
+        SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodySet, SoftBodyStatus,
+        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
     };
     #[cfg(feature = "plugin")]
-    pub use crate::render::{SoftBodyDebug, SoftBodySurface};
+    pub use crate::render::{SkinnedSurface, SoftBodyDebug, SoftBodySurface};
     #[cfg(feature = "egui")]
     pub use crate::ui::{OrbitCamera, SoftBodyUi, SoftBodyUiPlugin};
 }

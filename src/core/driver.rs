@@ -3,7 +3,7 @@
 //! state and says what happened.
 
 use crate::core::integrate::{
-    AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, StepError,
+    AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, SolverChoice, StepError,
 };
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::math::Scalar;
@@ -161,6 +161,9 @@ pub struct DriverConfig {
     /// states stop a run). A physical motion stays within a few times the scale; 100 catches
     /// an explicit method's blow-up within a step or two.
     pub energy_guard: Option<f64>,
+    /// Linear solver of the implicit methods.
+    #[serde(default)]
+    pub solver: SolverChoice,
 }
 
 impl Default for DriverConfig {
@@ -171,6 +174,7 @@ impl Default for DriverConfig {
             frame_dt: 1.0 / 60.0,
             adaptive: AdaptiveConfig::default(),
             energy_guard: Some(100.0),
+            solver: SolverChoice::Auto,
         }
     }
 }
@@ -196,7 +200,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// A simulation starting at time 0.
     pub fn new(system: Sys, mut state: S, config: DriverConfig) -> Self {
         system.apply_constraints(0.0, &mut state);
-        let integrator = config.integrator.build::<S, Sys>(config.adaptive);
+        let integrator = Self::build_integrator(&system, &config);
         let energy_bound = config
             .energy_guard
             .and_then(|f| system.energy_scale(&state).map(|s| s * f as Scalar));
@@ -222,7 +226,24 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// Switches method (the step-size policy and state are kept).
     pub fn set_integrator(&mut self, kind: IntegratorKind) {
         self.config.integrator = kind;
-        self.integrator = kind.build::<S, Sys>(self.config.adaptive);
+        self.integrator = Self::build_integrator(&self.system, &self.config);
+    }
+
+    /// Sets the linear solver of implicit methods (restarts the integrator).
+    pub fn set_solver(&mut self, solver: SolverChoice) {
+        self.config.solver = solver;
+        self.integrator = Self::build_integrator(&self.system, &self.config);
+    }
+
+    fn build_integrator(system: &Sys, config: &DriverConfig) -> Box<dyn Integrator<S, Sys>> {
+        let direct = match config.solver {
+            SolverChoice::Auto => system.prefers_direct_solver(),
+            SolverChoice::Pcg => false,
+            SolverChoice::Cholesky => true,
+        };
+        config
+            .integrator
+            .build_with::<S, Sys>(config.adaptive, direct)
     }
 
     /// Counters of the current integrator.

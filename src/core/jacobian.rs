@@ -231,6 +231,39 @@ pub trait Linearization: Sync {
         x: &mut [Vector],
         grad: Option<&mut [Vector]>,
     ) -> f64;
+    /// True when the system has elements whose semi-definite projection is costly (tets: a
+    /// 9×9 eigen-decomposition each). Implicit methods then first try the exact element
+    /// Hessians (springs still clamped) and project only when the solve reports an indefinite
+    /// matrix: at game step sizes `M` usually dominates the indefinite part of `h² K`.
+    fn has_costly_projection(&self) -> bool {
+        false
+    }
+    /// [`Linearization::assemble`] with springs' stiffness clamped and element Hessians
+    /// projected only when `project_elements`.
+    fn assemble_elements(
+        &self,
+        state: &ParticleState,
+        h: Scalar,
+        project_elements: bool,
+        a: &mut SpringMatrix,
+        kv: &mut [Vector],
+    ) {
+        let _ = project_elements;
+        self.assemble(state, h, true, a, kv)
+    }
+    /// [`Linearization::assemble_incremental_hessian`] with springs' stiffness clamped and
+    /// element Hessians projected only when `project_elements`.
+    fn assemble_incremental_hessian_elements(
+        &self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &[Vector],
+        project_elements: bool,
+        a: &mut SpringMatrix,
+    ) {
+        let _ = project_elements;
+        self.assemble_incremental_hessian(h, x0, x, true, a)
+    }
     /// The Hessian of [`Linearization::incremental_potential`] at `x = x₀ + h v`:
     /// `a = M + h c I + h Σ b n₀n₀ᵀ + h² K(x)`, with `definite` projecting each spring's `K_s`
     /// onto the positive semi-definite cone.
@@ -342,22 +375,33 @@ impl Linearization for ParticleModel {
         a: &mut SpringMatrix,
         kv: &mut [Vector],
     ) {
-        self.fill_mass_diagonal(h, a);
-        kv.fill(Vector::ZERO);
-        let h2 = h * h;
-        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
-            let (ks, ds, _) = spring_blocks(s, &state.x, &state.v, definite);
-            let blk = ds * h + ks * h2;
-            let (i, j) = (s.i as usize, s.j as usize);
-            a.diag[i] += blk;
-            a.diag[j] += blk;
-            *o = -blk;
-            // (K v)_i = −K_s (v_i − v_j), (K v)_j = +K_s (v_i − v_j)
-            let kvr = ks * (state.v[i] - state.v[j]);
-            kv[i] -= kvr;
-            kv[j] += kvr;
-        }
-        self.add_tet_stiffness(&state.x, h2, definite, a, Some((&state.v, kv)));
+        self.assemble_with(state, h, definite, definite, a, kv)
+    }
+
+    fn has_costly_projection(&self) -> bool {
+        !self.tets.is_empty()
+    }
+
+    fn assemble_elements(
+        &self,
+        state: &ParticleState,
+        h: Scalar,
+        project_elements: bool,
+        a: &mut SpringMatrix,
+        kv: &mut [Vector],
+    ) {
+        self.assemble_with(state, h, true, project_elements, a, kv)
+    }
+
+    fn assemble_incremental_hessian_elements(
+        &self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &[Vector],
+        project_elements: bool,
+        a: &mut SpringMatrix,
+    ) {
+        self.hessian_with(h, x0, x, true, project_elements, a)
     }
 
     fn constrained_velocities(&self, t_end: Scalar, h: Scalar, x0: &[Vector], v: &mut [Vector]) {
@@ -406,7 +450,7 @@ impl Linearization for ParticleModel {
         if !self.tets.is_empty() {
             // A barrier: a step that inverts or flattens an element has infinite energy, so
             // the line search shrinks it.
-            phi += self.tets.barrier_energy(x);
+            phi += self.tets.barrier_energy(x0, x);
             if phi == f64::INFINITY {
                 return phi;
             }
@@ -473,6 +517,20 @@ impl Linearization for ParticleModel {
         definite: bool,
         a: &mut SpringMatrix,
     ) {
+        self.hessian_with(h, x0, x, definite, definite, a)
+    }
+}
+
+impl ParticleModel {
+    fn hessian_with(
+        &self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &[Vector],
+        definite: bool,
+        project_tets: bool,
+        a: &mut SpringMatrix,
+    ) {
         self.fill_mass_diagonal(h, a);
         let h2 = h * h;
         for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
@@ -482,6 +540,33 @@ impl Linearization for ParticleModel {
             a.diag[j] += blk;
             *o = -blk;
         }
-        self.add_tet_stiffness(x, h2, definite, a, None);
+        self.add_tet_stiffness(x, h2, project_tets, a, None);
+    }
+
+    fn assemble_with(
+        &self,
+        state: &ParticleState,
+        h: Scalar,
+        definite: bool,
+        project_tets: bool,
+        a: &mut SpringMatrix,
+        kv: &mut [Vector],
+    ) {
+        self.fill_mass_diagonal(h, a);
+        kv.fill(Vector::ZERO);
+        let h2 = h * h;
+        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
+            let (ks, ds, _) = spring_blocks(s, &state.x, &state.v, definite);
+            let blk = ds * h + ks * h2;
+            let (i, j) = (s.i as usize, s.j as usize);
+            a.diag[i] += blk;
+            a.diag[j] += blk;
+            *o = -blk;
+            // (K v)_i = −K_s (v_i − v_j), (K v)_j = +K_s (v_i − v_j)
+            let kvr = ks * (state.v[i] - state.v[j]);
+            kv[i] -= kvr;
+            kv[j] += kvr;
+        }
+        self.add_tet_stiffness(&state.x, h2, project_tets, a, Some((&state.v, kv)));
     }
 }

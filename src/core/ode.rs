@@ -102,6 +102,12 @@ pub trait OdeSystem<S: OdeState>: Sync {
     /// Collision response after a step ending at `t` of size `h` (default: none).
     fn resolve_contacts(&self, _t: Scalar, _h: Scalar, _state: &mut S) {}
 
+    /// True when implicit methods should solve with a direct factorization by default
+    /// (finite-element bodies).
+    fn prefers_direct_solver(&self) -> bool {
+        false
+    }
+
     /// Force Jacobians for implicit methods, when the system has them.
     fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {
         None

@@ -528,6 +528,10 @@ impl OdeSystem<ParticleState> for ParticleModel {
         }
     }
 
+    fn prefers_direct_solver(&self) -> bool {
+        !self.tets.is_empty()
+    }
+
     fn linearization(&self) -> Option<&dyn crate::core::jacobian::Linearization> {
         Some(self)
     }

@@ -165,6 +165,7 @@ fn run<S: OdeState, Sys: OdeSystem<S>>(
             frame_dt: t,
             adaptive,
             energy_guard: Some(1e3),
+            solver: Default::default(),
         },
     );
     let start = Instant::now();

@@ -4,8 +4,10 @@
 //! [`SoftBodyCollider`]s anywhere in the world.
 
 use crate::core::driver::{CflLimit, Divergence, StepPolicy};
+pub use crate::core::fem::NeoHookean;
 use crate::core::forces::SpringLaw;
 use crate::core::integrate::IntegratorKind;
+pub use crate::core::integrate::SolverChoice;
 use crate::core::motion::Motion;
 use bevy::prelude::*;
 use bevy::reflect::impl_reflect_opaque;
@@ -37,6 +39,23 @@ impl_reflect_opaque!((in bevy_soft_body::core::driver) CflLimit(
     Deserialize
 ));
 impl_reflect_opaque!((in bevy_soft_body::core::forces) SpringLaw(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Hash,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::fem) NeoHookean(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Serialize,
+    Deserialize
+));
+impl_reflect_opaque!((in bevy_soft_body::core::integrate) SolverChoice(
     Clone,
     Debug,
     Default,
@@ -98,6 +117,8 @@ pub struct SoftBodyStatus {
     pub particles: u32,
     /// Springs in the packed model.
     pub springs: u32,
+    /// Tets in the packed model.
+    pub tets: u32,
     /// Times the packed model was rebuilt (topology or parameter changes).
     pub rebuilds: u32,
 }
@@ -191,6 +212,54 @@ pub struct Spring {
     /// How stiffness is given.
     pub law: SpringLaw,
 }
+
+/// A linear tetrahedron of neo-Hookean material over four particle entities of the same body
+/// (a volumetric finite element). Its rest shape is kept here, so the particles may start
+/// deformed; it must have positive volume (`dot(b − a, (c − a) × (d − a)) > 0`), or the body
+/// reports the tet and does not run. Its material is its own, else the body's
+/// [`ElasticMaterial`].
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Debug)]
+pub struct Tet {
+    /// The four particles.
+    pub particles: [Entity; 4],
+    /// Their rest positions (m).
+    pub rest: [Vec3; 4],
+    /// This tet's material (`None`: the body's).
+    pub material: Option<NeoHookean>,
+}
+
+/// The body a [`Tet`] belongs to.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship(relationship_target = BodyTets)]
+pub struct TetOf(pub Entity);
+
+/// The tets of a body (maintained by Bevy; despawning the body despawns them).
+#[derive(Component, Reflect, Clone, Debug, Default, PartialEq, Eq)]
+#[reflect(Component, Debug)]
+#[relationship_target(relationship = TetOf, linked_spawn)]
+pub struct BodyTets(Vec<Entity>);
+
+impl BodyTets {
+    /// The tet entities.
+    pub fn entities(&self) -> &[Entity] {
+        &self.0
+    }
+}
+
+/// The material of a body's tets (those without their own): Young's modulus, Poisson ratio
+/// and density. Particle masses are set from the density when a tet mesh is spawned; editing
+/// `young` or `poisson` here takes effect on the next step.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct ElasticMaterial(pub NeoHookean);
+
+/// Which linear solver a body's implicit methods use (default: Cholesky for bodies with tets,
+/// PCG otherwise).
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct LinearSolverChoice(pub SolverChoice);
 
 /// The body a [`Spring`] belongs to.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]

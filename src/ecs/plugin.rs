@@ -58,6 +58,11 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<ParticleOf>()
             .register_type::<BodyParticles>()
             .register_type::<Spring>()
+            .register_type::<Tet>()
+            .register_type::<TetOf>()
+            .register_type::<BodyTets>()
+            .register_type::<ElasticMaterial>()
+            .register_type::<LinearSolverChoice>()
             .register_type::<SpringOf>()
             .register_type::<BodySprings>()
             .register_type::<Pinned>()
@@ -100,6 +105,7 @@ impl Plugin for SoftBodyPlugin {
 
     fn finish(&self, app: &mut App) {
         crate::render::finish(app);
+        crate::assets::build(app);
     }
 }
 
@@ -113,6 +119,8 @@ pub struct BodySim {
     index: HashMap<Entity, u32>,
     /// Spring entities in the body's relationship order (the packed list may skip some).
     pub(crate) springs: Vec<Entity>,
+    /// Tet entities in the body's relationship order.
+    pub(crate) tets: Vec<Entity>,
     /// Positions and velocities as last written to the components (to tell user edits apart).
     written: Vec<(Vec3, Vec3)>,
     /// Particles following a target: index, target, offset, target's last position.
@@ -236,6 +244,21 @@ type ParticleItem<'a> = (
     Option<Ref<'a, ExternalForce>>,
 );
 
+/// A body's finite elements, for a rebuild.
+struct FemInput<'a, 'w, 's> {
+    list: &'a [Entity],
+    tets: &'a Query<'w, 's, Ref<'static, Tet>>,
+    material: Option<NeoHookean>,
+    solver: SolverChoice,
+}
+
+/// Tets, tets edited this frame, tets removed.
+type TetParams<'w, 's> = (
+    Query<'w, 's, Ref<'static, Tet>>,
+    Query<'w, 's, &'static TetOf, Changed<Tet>>,
+    RemovedComponents<'w, 's, Tet>,
+);
+
 /// What a rebuild produced.
 struct Built {
     sim: Simulation<ParticleState, ParticleModel>,
@@ -256,6 +279,7 @@ fn build_body(
     springs: &Query<Ref<Spring>>,
     targets: &Query<&GlobalTransform>,
     frame_dt: f64,
+    fem: FemInput,
 ) -> Result<Built, String> {
     let mut ents = Vec::with_capacity(list.len());
     let mut index = HashMap::with_capacity(list.len());
@@ -341,6 +365,34 @@ fn build_body(
             ),
         }
     }
+    for &te in fem.list {
+        let Ok(t) = fem.tets.get(te) else {
+            continue;
+        };
+        let idx = t.particles.map(|p| index.get(&p).copied());
+        let Some(v) = (idx[0].zip(idx[1]).zip(idx[2]).zip(idx[3]))
+            .map(|(((a, b), c), d)| [a as usize, b as usize, c as usize, d as usize])
+        else {
+            warn!(
+                "soft body {body_e}: tet {te} uses an entity that is not a particle of this body; the tet is left out"
+            );
+            continue;
+        };
+        let material = match t.material.or(fem.material) {
+            Some(m) => m,
+            None => {
+                return Err(format!(
+                    "tet {te}: no material (give the tet one, or the body an ElasticMaterial)"
+                ));
+            }
+        };
+        let rest = t
+            .rest
+            .map(|p| glam::DVec3::new(p.x as f64, p.y as f64, p.z as f64));
+        if let Err(e) = model.tets.push(v, rest, &material) {
+            return Err(format!("tet {te}: {e}"));
+        }
+    }
     model.gravity = from_f32(body.gravity.unwrap_or(Vec3::new(0.0, -9.81, 0.0)));
     model.drag = body.drag as Scalar;
     model.set_wind(wind.map(Into::into));
@@ -386,6 +438,7 @@ fn build_body(
         policy: body.step,
         frame_dt,
         energy_guard: body.energy_guard.map(|g| g as f64),
+        solver: fem.solver,
         ..Default::default()
     };
     Ok(Built {
@@ -424,7 +477,13 @@ fn prepare(
         Option<&BodyParticles>,
         Option<&BodySprings>,
         Option<Ref<SoftBodyWind>>,
+        (
+            Option<&BodyTets>,
+            Option<Ref<ElasticMaterial>>,
+            Option<Ref<LinearSolverChoice>>,
+        ),
     )>,
+    (tets, changed_tets, mut removed_tets): TetParams,
     particles: Query<ParticleItem>,
     springs: Query<Ref<Spring>>,
     changed_springs: Query<&SpringOf, Changed<Spring>>,
@@ -445,17 +504,22 @@ fn prepare(
         + removed_pins.read().count()
         + removed_forces.read().count()
         + removed_winds.read().count()
+        + removed_tets.read().count()
         > 0;
     // Bodies whose springs, pins or forces were edited (one pass over the changed ones, not a
     // lookup per spring of every body).
     let mut edited: Vec<Entity> = changed_springs.iter().map(|s| s.0).collect();
     edited.extend(changed_setup.iter().map(|p| p.0));
+    edited.extend(changed_tets.iter().map(|t| t.0));
     edited.sort_unstable();
     edited.dedup();
     let no_list: &[Entity] = &[];
-    for (body_e, body, mut bs, mut status, plist, slist, wind) in &mut bodies {
+    for (body_e, body, mut bs, mut status, plist, slist, wind, (tlist, material, solver)) in
+        &mut bodies
+    {
         let plist = plist.map_or(no_list, |p| p.entities());
         let slist = slist.map_or(no_list, |s| s.entities());
+        let tlist = tlist.map_or(no_list, |t| t.entities());
         let bs = &mut *bs;
         let mut dirty = bs.sim.is_none() && bs.problem.is_none()
             || body.is_changed()
@@ -464,6 +528,9 @@ fn prepare(
             || wind.as_ref().is_some_and(|w| w.is_changed())
             || bs.frame_dt != frame_dt
             || bs.springs.as_slice() != slist
+            || bs.tets.as_slice() != tlist
+            || material.as_ref().is_some_and(|m| m.is_changed())
+            || solver.as_ref().is_some_and(|m| m.is_changed())
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
         dirty |= edited.binary_search(&body_e).is_ok();
@@ -511,9 +578,16 @@ fn prepare(
             bs.report = false;
             bs.frame_dt = frame_dt;
             bs.springs = slist.to_vec();
+            bs.tets = tlist.to_vec();
             let wind = wind.map(|w| *w).or(global_wind.0);
+            let fem = FemInput {
+                list: tlist,
+                tets: &tets,
+                material: material.map(|m| m.0),
+                solver: solver.map_or(SolverChoice::Auto, |s| s.0),
+            };
             match build_body(
-                body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt,
+                body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt, fem,
             ) {
                 Ok(b) => {
                     bs.written = b
@@ -527,6 +601,7 @@ fn prepare(
                     status.particles = b.particles.len() as u32;
                     status.rebuilds += 1;
                     status.springs = b.sim.system.springs.len() as u32;
+                    status.tets = b.sim.system.tets.len() as u32;
                     bs.sim = Some(b.sim);
                     bs.particles = b.particles;
                     bs.index = b.index;

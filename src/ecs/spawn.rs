@@ -21,6 +21,23 @@ pub trait SpawnSoftBody {
 
     /// Reads a scene JSON file and spawns it (see [`SpawnSoftBody::spawn_soft_body`]). An
     /// unreadable file or invalid JSON is an error naming the file (and the field or line).
+    /// Spawns a tet mesh as one elastic body of `material` (particle masses `Σ ρV/4`), with its
+    /// boundary as the drawn surface and, when `display` gives a triangle mesh (vertices at
+    /// rest, triangles), a [`SkinnedSurface`](crate::render::SkinnedSurface) embedding it
+    /// (shown; S in the examples toggles). Pin or move particles afterwards through
+    /// [`SoftBodyInitial`]'s entity list.
+    fn spawn_tet_body(
+        &mut self,
+        mesh: &crate::core::fem::mesh::TetMesh,
+        material: crate::core::fem::NeoHookean,
+        body: SoftBody,
+        display: Option<(&[[f32; 3]], &[[u32; 3]])>,
+    ) -> Result<Entity, SceneError>;
+
+    /// Spawns a collider described as in scenes (a ground plane from
+    /// [`build::ground`](crate::core::build::ground), a moving ball...).
+    fn spawn_collider(&mut self, collider: &crate::core::collide::ColliderDesc) -> Entity;
+
     fn spawn_soft_body_file(
         &mut self,
         path: impl AsRef<std::path::Path>,
@@ -44,7 +61,45 @@ pub trait SpawnSoftBody {
 }
 
 impl SpawnSoftBody for Commands<'_, '_> {
-    fn spawn_soft_body(&mut self, scene: &Scene, mut body: SoftBody) -> Result<Entity, SceneError> {
+    fn spawn_collider(&mut self, collider: &crate::core::collide::ColliderDesc) -> Entity {
+        spawn_collider(self, collider)
+    }
+
+    fn spawn_tet_body(
+        &mut self,
+        mesh: &crate::core::fem::mesh::TetMesh,
+        material: crate::core::fem::NeoHookean,
+        body: SoftBody,
+        display: Option<(&[[f32; 3]], &[[u32; 3]])>,
+    ) -> Result<Entity, SceneError> {
+        let scene = mesh.to_scene("elastic body", material);
+        let (root, ids) = spawn_scene(self, &scene, body)?;
+        if let Some((points, tris)) = display {
+            let skinning = crate::core::fem::skin::Skinning::new(mesh, points);
+            self.entity(root).insert(crate::render::SkinnedSurface {
+                show: true,
+                color: Color::srgb(0.78, 0.72, 0.62),
+                skinning: std::sync::Arc::new(skinning),
+                triangles: std::sync::Arc::new(tris.to_vec()),
+                vertices: ids,
+            });
+        }
+        Ok(root)
+    }
+
+    fn spawn_soft_body(&mut self, scene: &Scene, body: SoftBody) -> Result<Entity, SceneError> {
+        spawn_scene(self, scene, body).map(|(root, _)| root)
+    }
+}
+
+/// Spawns a scene; returns the root and the particle entities in scene order.
+fn spawn_scene(
+    commands: &mut Commands,
+    scene: &Scene,
+    mut body: SoftBody,
+) -> Result<(Entity, Vec<Entity>), SceneError> {
+    {
+        let this = commands;
         scene.validate()?;
         body.gravity = Some(v(scene.gravity));
         body.drag = scene.drag as f32;
@@ -53,7 +108,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
         } else {
             scene.name.clone()
         };
-        let root = self
+        let root = this
             .spawn((
                 body,
                 Name::new(name),
@@ -62,10 +117,10 @@ impl SpawnSoftBody for Commands<'_, '_> {
             ))
             .id();
         if let Some(w) = scene.wind {
-            self.entity(root).insert(SoftBodyWind::from(w));
+            this.entity(root).insert(SoftBodyWind::from(w));
         }
         if let Some(s) = &scene.surface {
-            self.entity(root).insert(SoftBodySurface {
+            this.entity(root).insert(SoftBodySurface {
                 triangles: s.triangles.clone(),
                 uvs: s.uvs.clone(),
                 ..Default::default()
@@ -75,7 +130,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
             .particles
             .iter()
             .map(|p| {
-                let mut e = self.spawn((
+                let mut e = this.spawn((
                     Particle {
                         position: v(p.position),
                         velocity: v(p.velocity),
@@ -89,7 +144,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
                 e.id()
             })
             .collect();
-        self.entity(root).insert(SoftBodyInitial {
+        this.entity(root).insert(SoftBodyInitial {
             particles: ids
                 .iter()
                 .zip(&scene.particles)
@@ -97,7 +152,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
                 .collect(),
         });
         for (k, s) in scene.springs.iter().enumerate() {
-            self.spawn((
+            this.spawn((
                 Spring {
                     a: ids[s.a],
                     b: ids[s.b],
@@ -109,9 +164,22 @@ impl SpawnSoftBody for Commands<'_, '_> {
                 SpringOf(root),
             ));
         }
+        if let Some(m) = scene.material {
+            this.entity(root).insert(ElasticMaterial(m));
+        }
+        for t in &scene.tets {
+            this.spawn((
+                Tet {
+                    particles: t.vertices.map(|i| ids[i]),
+                    rest: t.vertices.map(|i| v(scene.particles[i].position)),
+                    material: t.material,
+                },
+                TetOf(root),
+            ));
+        }
         for m in &scene.motions {
             let start = crate::math::to_f32(m.motion.position(0.0));
-            let target = self
+            let target = this
                 .spawn((
                     Name::new("prescribed path"),
                     ScriptedMotion(m.motion),
@@ -119,34 +187,40 @@ impl SpawnSoftBody for Commands<'_, '_> {
                     GlobalTransform::from_translation(start),
                 ))
                 .id();
-            self.entity(ids[m.particle])
+            this.entity(ids[m.particle])
                 .insert(Pinned::to(target, Vec3::ZERO));
         }
         for f in &scene.forces {
-            self.entity(ids[f.particle])
+            this.entity(ids[f.particle])
                 .insert(ExternalForce(v(f.force)));
         }
         for c in &scene.colliders {
-            let q = c.rotation;
-            let tf = Transform::from_translation(crate::math::to_f32(c.motion.position(0.0)))
-                .with_rotation(
-                    Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32).normalize(),
-                );
-            let mut e = self.spawn((
-                SoftBodyCollider {
-                    shape: ColliderShape(c.shape.to_shared()),
-                    friction: c.material.friction as f32,
-                    restitution: c.material.restitution as f32,
-                    thickness: c.material.thickness as f32,
-                    bounce_threshold: c.material.bounce_threshold as f32,
-                },
-                tf,
-                GlobalTransform::from(tf),
-            ));
-            if !matches!(c.motion, crate::core::motion::Motion::Fixed { .. }) {
-                e.insert(ScriptedMotion(c.motion));
-            }
+            spawn_collider(this, c);
         }
-        Ok(root)
+        Ok((root, ids))
     }
+}
+
+/// Spawns one collider of a scene (with its scripted motion when it moves).
+fn spawn_collider(commands: &mut Commands, c: &crate::core::collide::ColliderDesc) -> Entity {
+    let q = c.rotation;
+    let tf = Transform::from_translation(crate::math::to_f32(c.motion.position(0.0)))
+        .with_rotation(
+            Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32).normalize(),
+        );
+    let mut e = commands.spawn((
+        SoftBodyCollider {
+            shape: ColliderShape(c.shape.to_shared()),
+            friction: c.material.friction as f32,
+            restitution: c.material.restitution as f32,
+            thickness: c.material.thickness as f32,
+            bounce_threshold: c.material.bounce_threshold as f32,
+        },
+        tf,
+        GlobalTransform::from(tf),
+    ));
+    if !matches!(c.motion, crate::core::motion::Motion::Fixed { .. }) {
+        e.insert(ScriptedMotion(c.motion));
+    }
+    e.id()
 }

@@ -62,8 +62,148 @@ impl Default for SoftBodyDebug {
     }
 }
 
+/// A high-resolution display mesh embedded in a tet body's rest shape and carried by it
+/// (seed 004's skinning): every frame `x_display = W q` and smooth normals. With `show`, the
+/// display mesh is drawn and the body's own surface hidden; without, the reverse.
+#[derive(Component, Reflect, Clone, Debug, Default)]
+#[reflect(Component, Default, Debug)]
+pub struct SkinnedSurface {
+    /// Draw the skinned mesh (else the simulation mesh's surface).
+    pub show: bool,
+    /// Colour of its material.
+    pub color: Color,
+    /// The skinning matrix, from the tet mesh's vertices.
+    #[reflect(ignore)]
+    pub skinning: std::sync::Arc<crate::core::fem::skin::Skinning>,
+    /// Display triangles.
+    #[reflect(ignore)]
+    pub triangles: std::sync::Arc<Vec<[u32; 3]>>,
+    /// The particle entity of each tet-mesh vertex.
+    #[reflect(ignore)]
+    pub vertices: Vec<Entity>,
+}
+
+/// The entity showing a body's [`SkinnedSurface`].
+#[derive(Component, Clone, Copy, Debug)]
+pub struct SkinnedDisplay(pub Entity);
+
 pub(crate) fn build(app: &mut App) {
-    app.add_systems(PostUpdate, (sync_surfaces, collider_meshes));
+    app.register_type::<SkinnedSurface>()
+        .add_systems(PostUpdate, (sync_surfaces, collider_meshes, sync_skinned));
+}
+
+fn sync_skinned(
+    mut commands: Commands,
+    meshes: Option<ResMut<Assets<Mesh>>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+    mut bodies: Query<(
+        Entity,
+        &SkinnedSurface,
+        &BodySim,
+        Option<&SkinnedDisplay>,
+        Option<&mut Visibility>,
+    )>,
+    mut displays: Query<(&Mesh3d, &mut Visibility), Without<SkinnedSurface>>,
+) {
+    let (Some(mut meshes), Some(mut materials)) = (meshes, materials) else {
+        return;
+    };
+    for (e, skin, bs, display, vis) in &mut bodies {
+        let Some(sim) = bs.simulation() else { continue };
+        if !sim.state.is_finite() {
+            continue;
+        }
+        // q: the tet-mesh vertices' current positions (a vertex whose particle is gone stays
+        // at the origin of the map: it no longer moves).
+        let q: Vec<crate::math::Vector> = skin
+            .vertices
+            .iter()
+            .map(|v| {
+                bs.index_of(*v)
+                    .map_or(crate::math::Vector::ZERO, |i| sim.state.x[i])
+            })
+            .collect();
+        let mut positions = vec![[0f32; 3]; skin.skinning.len()];
+        skin.skinning.apply(&q, &mut positions);
+        if let Some(mut vis) = vis {
+            let want = if skin.show {
+                Visibility::Hidden
+            } else {
+                Visibility::Inherited
+            };
+            if *vis != want {
+                *vis = want;
+            }
+        }
+        match display.and_then(|d| displays.get_mut(d.0).ok()) {
+            Some((m, mut dvis)) => {
+                let want = if skin.show {
+                    Visibility::Inherited
+                } else {
+                    Visibility::Hidden
+                };
+                if *dvis != want {
+                    *dvis = want;
+                }
+                if !skin.show {
+                    continue;
+                }
+                let Some(mut mesh) = meshes.get_mut(&m.0) else {
+                    continue;
+                };
+                if let Some(VertexAttributeValues::Float32x3(p)) =
+                    mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+                {
+                    p.copy_from_slice(&positions);
+                }
+                if let Some(VertexAttributeValues::Float32x3(nrm)) =
+                    mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
+                    && nrm.len() == positions.len()
+                {
+                    smooth_normals(&positions, &skin.triangles, nrm);
+                }
+            }
+            None => {
+                let n = positions.len();
+                if skin.triangles.iter().flatten().any(|&i| i as usize >= n) {
+                    warn!(
+                        "soft body {e}: a skinned triangle names a vertex beyond its {n}; not drawn"
+                    );
+                    commands.entity(e).remove::<SkinnedSurface>();
+                    continue;
+                }
+                let mut mesh = Mesh::new(
+                    PrimitiveTopology::TriangleList,
+                    RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+                );
+                let mut normals = vec![[0.0; 3]; n];
+                smooth_normals(&positions, &skin.triangles, &mut normals);
+                mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+                mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
+                mesh.insert_indices(Indices::U32(
+                    skin.triangles.iter().flatten().copied().collect(),
+                ));
+                let d = commands
+                    .spawn((
+                        Name::new("skinned display mesh"),
+                        Mesh3d(meshes.add(mesh)),
+                        MeshMaterial3d(materials.add(StandardMaterial {
+                            base_color: skin.color,
+                            perceptual_roughness: 0.6,
+                            ..default()
+                        })),
+                        Transform::IDENTITY,
+                        if skin.show {
+                            Visibility::Inherited
+                        } else {
+                            Visibility::Hidden
+                        },
+                    ))
+                    .id();
+                commands.entity(e).insert(SkinnedDisplay(d));
+            }
+        }
+    }
 }
 
 /// Adds the gizmo drawing when the app has gizmos (call after `DefaultPlugins`).

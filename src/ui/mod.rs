@@ -152,7 +152,26 @@ fn keys(
     mut bodies: Query<(Entity, &mut SoftBody, Option<&mut SoftBodyWind>)>,
     mut global_wind: ResMut<GlobalWind>,
     mut ui: ResMut<SoftBodyUi>,
+    mut skins: Query<&mut crate::render::SkinnedSurface>,
+    tet_bodies: Query<(), With<BodyTets>>,
 ) {
+    // Elastic-body scenes: S toggles the skinned display mesh, N (while running) toggles
+    // linearly implicit ↔ backward Euler.
+    let fem = !tet_bodies.is_empty();
+    if fem && input.just_pressed(KeyCode::KeyS) {
+        for mut s in &mut skins {
+            s.show = !s.show;
+        }
+    }
+    if fem && input.just_pressed(KeyCode::KeyN) && !clock.paused {
+        for (_, mut b, _) in &mut bodies {
+            b.integrator = if b.integrator == IntegratorKind::LinearlyImplicitEuler {
+                IntegratorKind::BackwardEuler
+            } else {
+                IntegratorKind::LinearlyImplicitEuler
+            };
+        }
+    }
     if egui_wants(&mut contexts, true) {
         return;
     }
@@ -192,6 +211,9 @@ fn keys(
         }
     }
     for (key, kind) in LETTERS {
+        if fem && key == KeyCode::KeyS && !skins.is_empty() {
+            continue;
+        }
         if input.just_pressed(key) {
             for (_, mut b, _) in &mut bodies {
                 b.integrator = kind;
@@ -248,6 +270,11 @@ type PanelItem<'a> = (
     Option<&'a Name>,
     Option<&'a BodySprings>,
     Option<&'a mut SoftBodyWind>,
+    (
+        Option<&'a mut ElasticMaterial>,
+        Option<&'a mut crate::render::SkinnedSurface>,
+        Option<&'a BodyParticles>,
+    ),
 );
 
 #[allow(clippy::too_many_arguments)]
@@ -260,6 +287,7 @@ fn panel(
     mut reset: MessageWriter<ResetSoftBodies>,
     mut bodies: Query<PanelItem>,
     mut springs: Query<&mut Spring>,
+    mut particles: Query<&mut Particle>,
 ) -> Result {
     let ctx = contexts.ctx_mut()?;
     let sel = selected(&ui_state, bodies.iter().map(|b| b.0));
@@ -315,7 +343,9 @@ fn panel(
                         }
                     });
             }
-            let Ok((_, mut body, status, bs, _, spring_list, wind)) = bodies.get_mut(sel) else {
+            let Ok((_, mut body, status, bs, _, spring_list, wind, (material, skin, plist))) =
+                bodies.get_mut(sel)
+            else {
                 return;
             };
             ui.label(format!(
@@ -380,6 +410,56 @@ fn panel(
                 }
                 ui_state.stiffness_scale = ks;
                 ui_state.damping_scale = ds;
+            }
+            if let Some(mut mat) = material {
+                ui.separator();
+                let m = mat.0;
+                let (mut e, mut nu, mut rho) = (m.young, m.poisson, m.density);
+                ui.add(
+                    egui::Slider::new(&mut e, 1e3..=1e9)
+                        .logarithmic(true)
+                        .text("Young's modulus (Pa)"),
+                );
+                ui.add(egui::Slider::new(&mut nu, -0.5..=0.49).text("Poisson ratio"));
+                ui.add(
+                    egui::Slider::new(&mut rho, 10.0..=20000.0)
+                        .logarithmic(true)
+                        .text("density (kg/m³)"),
+                );
+                if rho != m.density && let Some(list) = plist {
+                    // Masses are ρ V / 4 sums: scale them with the density.
+                    let r = (rho / m.density) as f32;
+                    for e in list.entities() {
+                        if let Ok(mut p) = particles.get_mut(*e) {
+                            p.mass *= r;
+                        }
+                    }
+                }
+                if (e, nu, rho) != (m.young, m.poisson, m.density) {
+                    mat.0 = crate::core::fem::NeoHookean {
+                        young: e,
+                        poisson: nu,
+                        density: rho,
+                    };
+                }
+                if let Some(sim) = bs.simulation() {
+                    let st = sim.stats();
+                    let steps = st.steps.max(1) as f64;
+                    ui.label(format!(
+                        "{} tets · {} inverted · Newton {:.2} it./step · residual {:.2e} m/s",
+                        sim.system.tets.len(),
+                        sim.system.tets.inverted(&sim.state.x),
+                        st.newton_iterations as f64 / steps,
+                        st.newton_residual,
+                    ));
+                }
+                if let Some(mut sk) = skin {
+                    let mut show = sk.show;
+                    ui.checkbox(&mut show, "skinned display mesh (S)");
+                    if show != sk.show {
+                        sk.show = show;
+                    }
+                }
             }
             match wind {
                 Some(mut w) => {

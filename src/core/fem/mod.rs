@@ -237,15 +237,24 @@ impl Tets {
             .sum()
     }
 
-    /// Elastic energy as a barrier: `+∞` when any element is inverted or flat.
-    pub fn barrier_energy(&self, x: &[Vector]) -> f64 {
+    /// Elastic energy as a barrier for a step from `x0` to `x`: `+∞` when the step inverts or
+    /// flattens an element that was not inverted at `x0`. An element already inverted at `x0`
+    /// (a state an explicit method or a user's drag left behind) keeps its finite energy, so
+    /// backward Euler can still step out of it.
+    pub fn barrier_energy(&self, x0: &[Vector], x: &[Vector]) -> f64 {
         let mut e = 0.0;
         for t in &self.tets {
             let f = t.rest.deformation_gradient(Self::positions(t, x));
-            e += t.rest.volume * t.material.barrier_density(&f);
-            if e == f64::INFINITY {
-                break;
+            let j = f.determinant();
+            if j <= 0.0
+                && t.rest
+                    .deformation_gradient(Self::positions(t, x0))
+                    .determinant()
+                    > 0.0
+            {
+                return f64::INFINITY;
             }
+            e += t.rest.volume * t.material.energy_density(&f);
         }
         e
     }

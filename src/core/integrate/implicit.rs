@@ -200,15 +200,29 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
             v.resize(n, Vector::ZERO);
         }
         lin.total_forces(t, ps, &mut self.f0);
-        lin.assemble(ps, h, self.definite, a, &mut self.kv);
-        for i in 0..n {
-            self.rhs[i] = (self.f0[i] + self.kv[i] * h) * (h * self.mask[i]);
-            // Warm start from the previous step's Δv (zero on the first step and for
-            // constrained particles): consecutive steps change velocity similarly.
-            self.dv[i] *= self.mask[i];
+        // Elements with a costly projection (tets): try their exact Hessians first, project
+        // only if the matrix turns out indefinite.
+        let lazy = self.definite && lin.has_costly_projection();
+        let tries: &[bool] = if lazy { &[false, true] } else { &[true] };
+        for &project in tries {
+            if lazy {
+                lin.assemble_elements(ps, h, project, a, &mut self.kv);
+            } else {
+                lin.assemble(ps, h, self.definite, a, &mut self.kv);
+            }
+            for i in 0..n {
+                self.rhs[i] = (self.f0[i] + self.kv[i] * h) * (h * self.mask[i]);
+                // Warm start from the previous step's Δv (zero on the first step and for
+                // constrained particles): consecutive steps change velocity similarly.
+                self.dv[i] *= self.mask[i];
+            }
+            self.last = self.solver.solve(a, &self.rhs, &mut self.dv, &self.mask);
+            self.stats.linear_solves += 1;
+            if !self.last.failed {
+                break;
+            }
+            self.dv.fill(Vector::ZERO);
         }
-        self.last = self.solver.solve(a, &self.rhs, &mut self.dv, &self.mask);
-        self.stats.linear_solves += 1;
         if self.last.failed {
             // Forget the unusable warm start; the state has not been touched.
             self.dv.fill(Vector::ZERO);
@@ -395,6 +409,25 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             Some(&mut self.g),
         );
         self.stats.evaluations += 1;
+        if phi == f64::INFINITY {
+            // Carrying on at the old velocity inverts an element (a barrier): start from rest
+            // instead, where every element keeps its current orientation.
+            for (vi, w) in self.v.iter_mut().zip(&self.mask) {
+                if *w != 0.0 {
+                    *vi = Vector::ZERO;
+                }
+            }
+            phi = lin.incremental_potential(
+                t_end,
+                h,
+                &self.x0,
+                &self.v0,
+                &self.v,
+                &mut self.x,
+                Some(&mut self.g),
+            );
+            self.stats.evaluations += 1;
+        }
         let mut full_step = false;
         loop {
             let gnorm = masked_norm(&self.g, &self.mask);
@@ -414,6 +447,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             if !worst.is_finite() || !phi.is_finite() {
                 return Err(StepError::SolverFailed(kind));
             }
+            self.stats.newton_residual = worst as f64;
             if worst <= self.tolerance {
                 rep.converged = true;
                 break;
@@ -423,15 +457,30 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             }
             rep.iterations += 1;
             self.stats.newton_iterations += 1;
-            lin.assemble_incremental_hessian(h, &self.x0, &self.x, self.definite, a);
-            for i in 0..n {
-                self.vt[i] = -self.g[i] * self.mask[i];
-                self.d[i] = Vector::ZERO;
+            // Elements with a costly projection (tets): exact Hessians first, projected only
+            // when the solve finds the matrix indefinite or the direction does not descend.
+            let lazy = self.definite && lin.has_costly_projection();
+            let tries: &[bool] = if lazy { &[false, true] } else { &[true] };
+            let mut solve = Default::default();
+            let mut slope = 0.0f64;
+            for &project in tries {
+                if lazy {
+                    lin.assemble_incremental_hessian_elements(h, &self.x0, &self.x, project, a);
+                } else {
+                    lin.assemble_incremental_hessian(h, &self.x0, &self.x, self.definite, a);
+                }
+                for i in 0..n {
+                    self.vt[i] = -self.g[i] * self.mask[i];
+                    self.d[i] = Vector::ZERO;
+                }
+                solve = self.solver.solve(a, &self.vt, &mut self.d, &self.mask);
+                self.stats.linear_solves += 1;
+                self.stats.linear_iterations += solve.iterations as u64;
+                slope = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
+                if !solve.failed && slope < 0.0 {
+                    break;
+                }
             }
-            let solve = self.solver.solve(a, &self.vt, &mut self.d, &self.mask);
-            self.stats.linear_solves += 1;
-            self.stats.linear_iterations += solve.iterations as u64;
-            let mut slope: f64 = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
             if solve.failed && self.definite {
                 // With the projected Hessian only bad input (a negative stiffness) makes the
                 // Newton matrix indefinite: report it rather than wander downhill.

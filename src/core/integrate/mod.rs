@@ -23,6 +23,7 @@ pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
 pub use implicit::{BackwardEuler, ImplicitDampingTrapezoid, LinearlyImplicitEuler, NewtonReport};
 
 use crate::core::ode::{OdeState, OdeSystem};
+use crate::core::solve::LinearSolver;
 use crate::math::Scalar;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -184,11 +185,37 @@ impl IntegratorKind {
         )
     }
 
-    /// Builds the integrator for states of type `S` and systems of type `Sys`.
+    /// Builds the integrator for states of type `S` and systems of type `Sys` (implicit
+    /// methods with their default linear solver, PCG).
     pub fn build<S: OdeState, Sys: OdeSystem<S> + ?Sized>(
         self,
         adaptive: AdaptiveConfig,
     ) -> Box<dyn Integrator<S, Sys>> {
+        self.build_with(adaptive, false)
+    }
+
+    /// Builds the integrator; with `direct`, linearly implicit and backward Euler solve with
+    /// the sparse Cholesky factorization instead of PCG.
+    pub fn build_with<S: OdeState, Sys: OdeSystem<S> + ?Sized>(
+        self,
+        adaptive: AdaptiveConfig,
+        direct: bool,
+    ) -> Box<dyn Integrator<S, Sys>> {
+        if direct {
+            match self {
+                Self::LinearlyImplicitEuler => {
+                    let mut m = LinearlyImplicitEuler::default();
+                    m.solver = LinearSolver::cholesky();
+                    return Box::new(m);
+                }
+                Self::BackwardEuler => {
+                    let mut m = BackwardEuler::default();
+                    m.solver = LinearSolver::cholesky();
+                    return Box::new(m);
+                }
+                _ => {}
+            }
+        }
         match self {
             Self::ForwardEuler => Box::new(ForwardEuler::default()),
             Self::SymplecticEuler => Box::new(SymplecticEuler::default()),
@@ -207,6 +234,20 @@ impl fmt::Display for IntegratorKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
     }
+}
+
+/// Which linear solver implicit methods use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverChoice {
+    /// What suits the system: the sparse Cholesky factorization for finite-element bodies
+    /// (stiff, small, and Newton needs accurate directions), PCG for springs.
+    #[default]
+    Auto,
+    /// Preconditioned conjugate gradients.
+    Pcg,
+    /// Sparse Cholesky (faer).
+    Cholesky,
 }
 
 /// The text did not name an integrator.
@@ -308,7 +349,7 @@ impl fmt::Display for StepError {
 impl std::error::Error for StepError {}
 
 /// Counters an integrator keeps over its life (reset with [`Integrator::reset`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct IntegratorStats {
     /// Accepted steps.
     pub steps: u64,
@@ -322,6 +363,8 @@ pub struct IntegratorStats {
     pub linear_solves: u64,
     /// Newton iterations (backward Euler).
     pub newton_iterations: u64,
+    /// Backward Euler's last step: its final residual `max_i |∇Φ_i| / m_i` (m/s).
+    pub newton_residual: f64,
 }
 
 /// A time integrator for states `S` of systems `Sys`.
