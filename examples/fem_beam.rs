@@ -33,9 +33,6 @@ fn analytic_tip() -> f64 {
     w * LENGTH.powi(4) / (8.0 * MATERIAL.young * i)
 }
 
-#[derive(Component)]
-struct Readout;
-
 #[derive(Resource)]
 struct Beam {
     root: Entity,
@@ -60,19 +57,10 @@ fn main() {
             ..default()
         });
         c.insert_resource(Beam { root, tip: vec![] });
-        c.spawn((
-            Text::new(""),
-            Node {
-                position_type: PositionType::Absolute,
-                bottom: Val::Px(12.0),
-                right: Val::Px(12.0),
-                ..default()
-            },
-            Readout,
-        ));
         common::stage(&mut c, Vec3::new(0.0, HEIGHT as f32 - 0.05, 0.0), 1.8);
     })
-    .add_systems(Update, (clamp_and_find_tip, readout));
+    .add_systems(Update, (clamp_and_find_tip, marker))
+    .add_systems(bevy_egui::EguiPrimaryContextPass, readout);
     app.run();
 }
 
@@ -99,43 +87,44 @@ fn clamp_and_find_tip(
     *done = true;
 }
 
+/// Mean downward displacement of the free end (m).
+fn tip_deflection(beam: &Beam, particles: &Query<&Particle>, init: &SoftBodyInitial) -> f32 {
+    let rest: std::collections::HashMap<Entity, Vec3> =
+        init.particles.iter().map(|(e, x, _)| (*e, *x)).collect();
+    let n = beam.tip.len().max(1) as f32;
+    beam.tip
+        .iter()
+        .filter_map(|e| Some(rest[e].y - particles.get(*e).ok()?.position.y))
+        .sum::<f32>()
+        / n
+}
+
+/// The analytic tip as a yellow marker.
+fn marker(mut gizmos: Gizmos) {
+    let eb = analytic_tip() as f32;
+    let m = Vec3::new(0.5, HEIGHT as f32 + SIDE as f32 / 2.0 - eb, 0.0);
+    let c = Color::srgb(1.0, 0.85, 0.2);
+    gizmos.line(m - Vec3::Z * 0.12, m + Vec3::Z * 0.12, c);
+    gizmos.sphere(Isometry3d::from_translation(m), 0.01, c);
+}
+
 fn readout(
     beam: Res<Beam>,
     particles: Query<&Particle>,
     init: Query<&SoftBodyInitial>,
-    mut text: Query<&mut Text, With<Readout>>,
-    mut gizmos: Gizmos,
-) {
+    mut contexts: bevy_egui::EguiContexts,
+) -> Result {
     let Ok(init) = init.get(beam.root) else {
-        return;
+        return Ok(());
     };
-    let rest: std::collections::HashMap<Entity, Vec3> =
-        init.particles.iter().map(|(e, x, _)| (*e, *x)).collect();
-    let n = beam.tip.len().max(1) as f32;
-    let w: f32 = beam
-        .tip
-        .iter()
-        .filter_map(|e| Some(rest[e].y - particles.get(*e).ok()?.position.y))
-        .sum::<f32>()
-        / n;
+    let w = tip_deflection(&beam, &particles, init);
     let eb = analytic_tip() as f32;
-    let marker = Vec3::new(0.5, HEIGHT as f32 + SIDE as f32 / 2.0 - eb, 0.0);
-    gizmos.line(
-        marker - Vec3::Z * 0.12,
-        marker + Vec3::Z * 0.12,
-        Color::srgb(1.0, 0.85, 0.2),
-    );
-    gizmos.sphere(
-        Isometry3d::from_translation(marker),
-        0.01,
-        Color::srgb(1.0, 0.85, 0.2),
-    );
-    if let Ok(mut t) = text.single_mut() {
-        t.0 = format!(
-            "tip deflection {:.2} mm\nEuler–Bernoulli {:.2} mm (yellow)\nratio {:.3}",
-            1e3 * w,
-            1e3 * eb,
-            w / eb
-        );
-    }
+    bevy_egui::egui::Window::new("cantilever")
+        .anchor(bevy_egui::egui::Align2::RIGHT_BOTTOM, [-8.0, -8.0])
+        .show(contexts.ctx_mut()?, |ui| {
+            ui.label(format!("tip deflection {:.2} mm", 1e3 * w));
+            ui.label(format!("Euler–Bernoulli {:.2} mm (yellow)", 1e3 * eb));
+            ui.label(format!("ratio {:.3}", w / eb));
+        });
+    Ok(())
 }

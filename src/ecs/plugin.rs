@@ -252,11 +252,12 @@ struct FemInput<'a, 'w, 's> {
     solver: SolverChoice,
 }
 
-/// Tets, tets edited this frame, tets removed.
+/// Tets, tets edited this frame, tets and materials removed.
 type TetParams<'w, 's> = (
     Query<'w, 's, Ref<'static, Tet>>,
     Query<'w, 's, &'static TetOf, Changed<Tet>>,
     RemovedComponents<'w, 's, Tet>,
+    RemovedComponents<'w, 's, ElasticMaterial>,
 );
 
 /// What a rebuild produced.
@@ -483,7 +484,7 @@ fn prepare(
             Option<Ref<LinearSolverChoice>>,
         ),
     )>,
-    (tets, changed_tets, mut removed_tets): TetParams,
+    (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
     particles: Query<ParticleItem>,
     springs: Query<Ref<Spring>>,
     changed_springs: Query<&SpringOf, Changed<Spring>>,
@@ -505,6 +506,7 @@ fn prepare(
         + removed_forces.read().count()
         + removed_winds.read().count()
         + removed_tets.read().count()
+        + removed_materials.read().count()
         > 0;
     // Bodies whose springs, pins or forces were edited (one pass over the changed ones, not a
     // lookup per spring of every body).

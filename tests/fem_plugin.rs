@@ -1,0 +1,257 @@
+//! Tet bodies through the plugin (headless `MinimalPlugins`, 1/64 s fixed steps): they step
+//! bit-for-bit as the core driver, use the sparse Cholesky by default, report bad tets naming
+//! the entity, leave out tets whose particles are gone, skin display meshes, and load through
+//! the asset loader.
+#![cfg(feature = "plugin")]
+#![allow(clippy::unnecessary_cast)]
+
+use bevy::ecs::system::RunSystemOnce;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
+use bevy_soft_body::core::fem::NeoHookean;
+use bevy_soft_body::core::fem::mesh::TetMesh;
+use bevy_soft_body::core::integrate::IntegratorKind;
+use bevy_soft_body::ecs::*;
+use bevy_soft_body::math::to_f32;
+
+const FRAME: f64 = 1.0 / 64.0;
+
+fn app() -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+        .insert_resource(Time::<Fixed>::from_seconds(FRAME))
+        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+    app.update();
+    app
+}
+
+fn body(kind: IntegratorKind) -> SoftBody {
+    SoftBody {
+        integrator: kind,
+        step: StepPolicy::Fixed { h: step(kind) as _ },
+        ..Default::default()
+    }
+}
+
+fn block() -> TetMesh {
+    TetMesh::tet_box([0.3, 0.2, 0.2], [3, 2, 2]).transformed(1.0, [0.0, 1.0, 0.0])
+}
+
+/// Explicit methods need steps below the block's fastest period (E = 200 kPa, 0.1 m cells:
+/// about 1/800 s); 1/64 s / 16 is dyadic, so plugin and core land on the same times.
+fn step(kind: IntegratorKind) -> f64 {
+    if kind.is_implicit() {
+        FRAME
+    } else {
+        FRAME / 16.0
+    }
+}
+
+const MAT: NeoHookean = NeoHookean {
+    young: 2e5,
+    poisson: 0.4,
+    density: 1000.0,
+};
+
+fn spawn_block(app: &mut App, kind: IntegratorKind, display: Option<Vec<[f32; 3]>>) -> Entity {
+    app.world_mut()
+        .run_system_once(move |mut c: Commands| {
+            let tris = vec![[0u32, 1, 2]];
+            c.spawn_tet_body(
+                &block(),
+                MAT,
+                body(kind),
+                display.as_ref().map(|d| (d.as_slice(), tris.as_slice())),
+            )
+            .unwrap()
+        })
+        .unwrap()
+}
+
+#[test]
+fn a_tet_body_steps_exactly_as_the_core_driver() {
+    for kind in [
+        IntegratorKind::SymplecticEuler,
+        IntegratorKind::LinearlyImplicitEuler,
+        IntegratorKind::BackwardEuler,
+    ] {
+        let mut app = app();
+        let e = spawn_block(&mut app, kind, None);
+        // Pin the x = 0 face, in the App and in the core model alike.
+        app.update();
+        let parts: Vec<Entity> = app
+            .world()
+            .get::<BodyParticles>(e)
+            .unwrap()
+            .entities()
+            .to_vec();
+        for p in &parts {
+            if app.world().get::<Particle>(*p).unwrap().position.x.abs() < 1e-4 {
+                app.world_mut().entity_mut(*p).insert(Pinned::here());
+            }
+        }
+        app.update();
+        let n_pinned = parts
+            .iter()
+            .filter(|p| app.world().get::<Pinned>(**p).is_some())
+            .count();
+        assert_eq!(n_pinned, 9); // the x = 0 face of a 3×2×2-cell box: 3 × 3 vertices
+        // The core run, from the same start (after the first frame).
+        let mesh = block();
+        let (mut model, _) = mesh.to_scene("b", MAT).build().unwrap();
+        // `Tet` components keep their rest shape in f32 (Bevy's `Vec3`): the same rounding here.
+        model.tets = bevy_soft_body::core::fem::Tets::new();
+        for t in &mesh.tets {
+            let rest = t.map(|i| {
+                glam::DVec3::from_array(mesh.vertices[i as usize].map(|c| c as f32 as f64))
+            });
+            model.tets.push(t.map(|i| i as usize), rest, &MAT).unwrap();
+        }
+        model.gravity = bevy_soft_body::math::vec3([0.0, -9.81, 0.0]);
+        let bs = app.world().get::<BodySim>(e).unwrap();
+        let sim0 = bs.simulation().unwrap();
+        let state = sim0.state.clone();
+        for (i, x) in state.x.iter().enumerate() {
+            if mesh.vertices[i][0] == 0.0 {
+                model.pin(i, *x);
+            }
+        }
+        let mut core = Simulation::new(
+            model,
+            state,
+            DriverConfig {
+                integrator: kind,
+                policy: StepPolicy::Fixed { h: step(kind) as _ },
+                frame_dt: FRAME,
+                ..Default::default()
+            },
+        );
+        for _ in 0..40 {
+            app.update();
+            core.advance_frame().unwrap();
+        }
+        let bs = app.world().get::<BodySim>(e).unwrap();
+        let sim = bs.simulation().unwrap();
+        let worst = sim
+            .state
+            .x
+            .iter()
+            .zip(&core.state.x)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, |m: f32, d| m.max(d as f32));
+        let sag = core
+            .state
+            .x
+            .iter()
+            .map(|x| 1.0 - x.y as f32)
+            .fold(0.0f32, f32::max);
+        println!("{kind}: plugin vs core after 40 frames {worst:e} m (sag {sag:.3} m)");
+        assert!(worst == 0.0, "{kind}: {worst}");
+        if kind.is_implicit() {
+            // Tet bodies solve with the sparse Cholesky by default: no CG iterations.
+            assert!(sim.stats().linear_solves > 0 && sim.stats().linear_iterations == 0);
+        }
+        assert!(sag > 0.0 && sag < 0.2, "{sag}");
+        let st = app.world().get::<SoftBodyStatus>(e).unwrap();
+        assert_eq!(st.tets, 72);
+        // Particle components follow, and are finite.
+        for (p, x) in parts.iter().zip(&sim.state.x) {
+            assert_eq!(
+                app.world().get::<Particle>(*p).unwrap().position,
+                to_f32(*x)
+            );
+        }
+    }
+}
+
+#[test]
+fn bad_tets_are_reported_by_entity_and_missing_particles_leave_the_tet_out() {
+    let mut app = app();
+    let e = spawn_block(&mut app, IntegratorKind::BackwardEuler, None);
+    app.update();
+    let tets: Vec<Entity> = app.world().get::<BodyTets>(e).unwrap().entities().to_vec();
+    assert_eq!(tets.len(), 72);
+    // A flat rest shape: the body is left out with a message naming the tet.
+    let bad = tets[5];
+    {
+        let mut t = app.world_mut().get_mut::<Tet>(bad).unwrap();
+        let r = t.rest;
+        t.rest = [r[0], r[1], r[2], r[0] + (r[1] - r[0]) + (r[2] - r[0])];
+    }
+    app.update();
+    let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+    let BodyState::Invalid(msg) = &st.state else {
+        panic!("expected Invalid, got {:?}", st.state)
+    };
+    println!("{msg}");
+    assert!(
+        msg.contains(&format!("{bad}")) && msg.contains("volume"),
+        "{msg}"
+    );
+    // Fix it by despawning the tet: the body runs again with 71.
+    app.world_mut().despawn(bad);
+    app.update();
+    app.update();
+    let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+    assert_eq!(st.state, BodyState::Running);
+    assert_eq!(st.tets, 71);
+    // A despawned particle: the tets that used it are left out (with a warning), the body runs.
+    let p = app.world().get::<BodyParticles>(e).unwrap().entities()[20];
+    app.world_mut().despawn(p);
+    for _ in 0..5 {
+        app.update();
+    }
+    let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+    println!(
+        "after despawning a particle: {} tets, {:?}",
+        st.tets, st.state
+    );
+    assert_eq!(st.state, BodyState::Running);
+    assert!(st.tets < 71 && st.tets > 50);
+    // A tet without any material: reported.
+    let parts: Vec<Entity> = app.world().get::<BodyParticles>(e).unwrap().entities()[..4].to_vec();
+    app.world_mut().entity_mut(e).remove::<ElasticMaterial>();
+    app.update();
+    let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+    assert!(
+        matches!(&st.state, BodyState::Invalid(m) if m.contains("no material")),
+        "{:?}",
+        st.state
+    );
+    let _ = parts;
+}
+
+#[test]
+fn the_skinned_display_follows_the_body() {
+    let mut app = app();
+    // Display points: the block's centre and a point 1 cm outside its +x face.
+    let pts = vec![[0.15f32, 1.1, 0.1], [0.31, 1.1, 0.1], [0.0, 1.0, 0.0]];
+    let e = spawn_block(&mut app, IntegratorKind::BackwardEuler, Some(pts.clone()));
+    for _ in 0..20 {
+        app.update();
+    }
+    let w = app.world();
+    let skin = w.get::<bevy_soft_body::render::SkinnedSurface>(e).unwrap();
+    assert_eq!(skin.skinning.len(), 3);
+    assert!((skin.skinning.outside[1] - 0.01).abs() < 1e-6);
+    let bs = w.get::<BodySim>(e).unwrap();
+    let sim = bs.simulation().unwrap();
+    let q: Vec<_> = skin
+        .vertices
+        .iter()
+        .map(|v| sim.state.x[bs.index_of(*v).unwrap()])
+        .collect();
+    let mut out = vec![[0f32; 3]; 3];
+    skin.skinning.apply(&q, &mut out);
+    // The corner vertex (0,1,0) is a tet vertex: W picks it exactly.
+    let corner = bs.index_of(skin.vertices[0]).unwrap();
+    assert_eq!(out[2], to_f32(sim.state.x[corner]).to_array());
+    // The body fell freely for 20 frames: every display point fell with it. Backward Euler's
+    // free fall after n steps is g h² n (n + 1) / 2 (not ½ g t²).
+    let n = 20.0f32;
+    let fall = 9.81 * (FRAME as f32).powi(2) * n * (n + 1.0) / 2.0;
+    for (o, p) in out.iter().zip(&pts) {
+        assert!((p[1] - o[1] - fall).abs() < 1e-3, "{o:?} {p:?} {fall}");
+    }
+}
