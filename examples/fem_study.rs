@@ -1,12 +1,18 @@
 //! Headless finite-element measurements, printed as tables (no window, no keys):
 //!
-//! 1. cantilever: tip deflection of a clamped beam under gravity against Euler–Bernoulli
-//!    `w L⁴ / (8 E I)` as the tet mesh is refined;
-//! 2. stiff armadillo: linearly implicit vs backward Euler at h = 1/60 (the seed's claim);
-//! 3. cost per 60 Hz step of the bunny and the armadillo with backward Euler, split into
-//!    assembly and solve.
+//! - `cantilever`: tip deflection of a clamped beam under gravity against Euler–Bernoulli
+//!   `w L⁴ / (8 E I)` as the tet mesh is refined (linear tets lock in bending);
+//! - `armadillo [E,E,… [KICK,KICK,…]]`: linearly implicit vs backward Euler at h = 1/60 on the
+//!   armadillo hung by its top 5 % and yanked sideways (KICK m/s per metre of height), 5 s;
+//! - `bunny`: energy, inverted tets and ground contacts per frame of the bunny dropped on the
+//!   ground (env: YOUNG, DROP, BE=1 for backward Euler, SE=1 with H for symplectic Euler,
+//!   PINBOTTOM=1 to pin its feet instead).
 //!
-//! `cargo run --release --no-default-features --example fem_study -- [cantilever|armadillo|cost]`
+//! `cargo run --release --no-default-features --example fem_study -- cantilever`
+//! (costs per step and per Newton iteration are in `cargo bench --bench fem`).
+
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
 
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::fem::NeoHookean;
@@ -123,7 +129,97 @@ pub fn armadillo(
     (sim.frame, None, emax)
 }
 
+/// The bunny on the ground (LIE or BE) with or without the ground: energy and inverted
+/// elements per frame (diagnostics).
+fn bunny_trace(kind: IntegratorKind, ground: bool, kick: f64) {
+    let text = std::fs::read_to_string("assets/meshes/bunny_coarse.mesh").unwrap();
+    let mesh = TetMesh::from_medit("bunny_coarse.mesh", &text)
+        .unwrap()
+        .transformed(
+            1.0,
+            [
+                0.0,
+                std::env::var("DROP").map_or(0.002, |s| s.parse().unwrap()),
+                0.0,
+            ],
+        );
+    let young: f64 = std::env::var("YOUNG").map_or(2e5, |s| s.parse().unwrap());
+    let mat = NeoHookean {
+        young,
+        poisson: 0.4,
+        density: 1000.0,
+    };
+    let mut scene = mesh.to_scene("bunny", mat);
+    if !ground {
+        scene.gravity = [0.0; 3];
+    } else if std::env::var("PINBOTTOM").is_ok() {
+        for p in &mut scene.particles {
+            if p.position[1] < 0.03 {
+                p.pinned = true;
+            }
+        }
+    } else {
+        scene
+            .colliders
+            .push(bevy_soft_body::core::build::ground(0.0, 0.0, 0.6));
+    }
+    for p in &mut scene.particles {
+        p.velocity = [kick * p.position[1], 0.0, 0.0];
+    }
+    let (model, state) = scene.build().unwrap();
+    let hh: f64 = std::env::var("H").map_or(1.0 / 60.0, |s| s.parse().unwrap());
+    let kind = if std::env::var("SE").is_ok() {
+        IntegratorKind::SymplecticEuler
+    } else {
+        kind
+    };
+    let mut sim = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: kind,
+            policy: StepPolicy::Fixed { h: hh as _ },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        },
+    );
+    use bevy_soft_body::core::ode::OdeSystem;
+    for _ in 0..60 {
+        if let Err(d) = sim.advance_frame() {
+            println!("{d}");
+            break;
+        }
+        let e = sim.system.energy(sim.time, &sim.state).unwrap();
+        if sim.frame <= 10 || sim.frame % 3 == 0 {
+            println!(
+                "frame {} E {:.1} K {:.1} elastic {:.1} inverted {} ymin {:.4} on ground {}",
+                sim.frame,
+                e.total(),
+                e.kinetic,
+                sim.system.tets.energy(&sim.state.x),
+                sim.system.tets.inverted(&sim.state.x),
+                sim.state.x.iter().map(|x| x.y as f64).fold(f64::MAX, f64::min),
+                sim.state.x.iter().filter(|x| (x.y as f64) <= 1e-6).count()
+            );
+        }
+    }
+}
+
 fn main() {
+    if std::env::args().nth(1).as_deref() == Some("bunny") {
+        let ground = std::env::args().nth(2).as_deref() != Some("noground");
+        let kick: f64 = std::env::args().nth(3).map_or(1.0, |s| s.parse().unwrap());
+        bunny_trace(
+            if std::env::var("BE").is_ok() {
+                IntegratorKind::BackwardEuler
+            } else {
+                IntegratorKind::LinearlyImplicitEuler
+            },
+            ground,
+            kick,
+        );
+        return;
+    }
     if let Some(a) = std::env::args().nth(1).filter(|a| a == "armadillo") {
         let _ = a;
         let young_list: Vec<f64> = std::env::args()

@@ -191,6 +191,85 @@ impl Collider {
         Self::new(d.shape.to_shared(), d.motion, rot, d.material)
     }
 
+    /// Where particle position `p` should be and the contact normal, when it is inside the
+    /// collider (centred at `c`) or closer to its surface than `thick`.
+    fn contact(&self, c: Vector, thick: Scalar, p: Vector) -> Option<(Vector, Vector)> {
+        match self.fast {
+            Fast::Sphere(r) => {
+                let d = p - c;
+                let dist = d.length();
+                if dist < r + thick {
+                    let n = if dist > 0.0 { d / dist } else { Vector::Y };
+                    Some((c + n * (r + thick), n))
+                } else {
+                    None
+                }
+            }
+            Fast::Plane(n) => {
+                let s = (p - c).dot(n);
+                if s < thick {
+                    Some((p + n * (thick - s), n))
+                } else {
+                    None
+                }
+            }
+            Fast::General => {
+                let pose = Pose3::from_parts(to_f32(c), self.rotation);
+                let pf = to_f32(p);
+                let proj = self.shape.project_point(&pose, pf, true);
+                let d = pf - proj.point;
+                let dist = d.length();
+                if proj.is_inside {
+                    // Inside: the way out is towards the projection.
+                    let (n, _) = if dist > 1e-9 {
+                        (-d / dist, dist)
+                    } else {
+                        (glam::Vec3::Y, 0.0)
+                    };
+                    let n = from_f32(n);
+                    Some((from_f32(proj.point) + n * thick, n))
+                } else if (dist as Scalar) < thick && dist > 1e-9 {
+                    let n = from_f32(d / dist);
+                    Some((from_f32(proj.point) + n * thick, n))
+                } else {
+                    None
+                }
+            }
+        }
+    }
+
+    /// Particles resting on or pressed into this collider at time `t`: touching (within the
+    /// thickness plus `slack`), not moving away, and pushed into it by `f` (their total force).
+    /// Implicit steps hold them still (Baraff & Witkin's constraint filter: sticking contact)
+    /// instead of letting the step drive them in and projecting them out afterwards, which
+    /// pumps energy into stiff elements. Marks them in `held` and sets their velocity to the
+    /// collider's.
+    pub fn hold(
+        &self,
+        t: Scalar,
+        slack: Scalar,
+        x: &[Vector],
+        v: &mut [Vector],
+        f: &[Vector],
+        inv_mass: &[Scalar],
+        held: &mut [bool],
+    ) {
+        let (c, vc, _) = self.motion.eval(t);
+        let thick = self.material.thickness as Scalar + slack;
+        for i in 0..x.len() {
+            if inv_mass[i] == 0.0 || held[i] {
+                continue;
+            }
+            if let Some((_, n)) = self.contact(c, thick, x[i])
+                && (v[i] - vc).dot(n) <= 0.0
+                && f[i].dot(n) <= 0.0
+            {
+                held[i] = true;
+                v[i] = vc;
+            }
+        }
+    }
+
     /// Pushes particles out of the collider at time `t` and applies restitution and friction.
     /// `inv_mass` selects the particles that respond (zero: pinned or prescribed). Returns the
     /// number of particles in contact.
@@ -209,49 +288,7 @@ impl Collider {
             if inv_mass[i] == 0.0 {
                 continue;
             }
-            let p = x[i];
-            let hit: Option<(Vector, Vector)> = match self.fast {
-                Fast::Sphere(r) => {
-                    let d = p - c;
-                    let dist = d.length();
-                    if dist < r + thick {
-                        let n = if dist > 0.0 { d / dist } else { Vector::Y };
-                        Some((c + n * (r + thick), n))
-                    } else {
-                        None
-                    }
-                }
-                Fast::Plane(n) => {
-                    let s = (p - c).dot(n);
-                    if s < thick {
-                        Some((p + n * (thick - s), n))
-                    } else {
-                        None
-                    }
-                }
-                Fast::General => {
-                    let pose = Pose3::from_parts(to_f32(c), self.rotation);
-                    let pf = to_f32(p);
-                    let proj = self.shape.project_point(&pose, pf, true);
-                    let d = pf - proj.point;
-                    let dist = d.length();
-                    if proj.is_inside {
-                        // Inside: the way out is towards the projection.
-                        let (n, _) = if dist > 1e-9 {
-                            (-d / dist, dist)
-                        } else {
-                            (glam::Vec3::Y, 0.0)
-                        };
-                        let n = from_f32(n);
-                        Some((from_f32(proj.point) + n * thick, n))
-                    } else if (dist as Scalar) < thick && dist > 1e-9 {
-                        let n = from_f32(d / dist);
-                        Some((from_f32(proj.point) + n * thick, n))
-                    } else {
-                        None
-                    }
-                }
-            };
+            let hit = self.contact(c, thick, x[i]);
             if let Some((target, n)) = hit {
                 contacts += 1;
                 x[i] = target;

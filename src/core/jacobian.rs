@@ -231,6 +231,12 @@ pub trait Linearization: Sync {
         x: &mut [Vector],
         grad: Option<&mut [Vector]>,
     ) -> f64;
+    /// Holds particles resting on or pressed into colliders for the coming implicit step
+    /// (their `mask` set to 0 and velocity to the collider's): contact as a constraint of the
+    /// solve. The default holds none.
+    fn hold_contacts(&self, t: Scalar, state: &mut ParticleState, mask: &mut [Scalar]) {
+        let _ = (t, state, mask);
+    }
     /// True when the system has elements whose semi-definite projection is costly (tets: a
     /// 9×9 eigen-decomposition each). Implicit methods then first try the exact element
     /// Hessians (springs still clamped) and project only when the solve reports an indefinite
@@ -380,6 +386,35 @@ impl Linearization for ParticleModel {
 
     fn has_costly_projection(&self) -> bool {
         !self.tets.is_empty()
+    }
+
+    /// Finite-element bodies hold their contacts (see [`Collider::hold`](crate::core::collide::Collider::hold)); spring bodies keep
+    /// the post-step projection alone, as before.
+    fn hold_contacts(&self, t: Scalar, state: &mut ParticleState, mask: &mut [Scalar]) {
+        if self.tets.is_empty() || self.colliders.is_empty() {
+            return;
+        }
+        let n = self.len();
+        let mut f = vec![Vector::ZERO; n];
+        self.total_forces(t, state, &mut f);
+        let mut held = vec![false; n];
+        // 1 µm of slack: a particle projected onto the surface last step is touching it.
+        for c in &self.colliders {
+            c.hold(
+                t,
+                1e-6,
+                &state.x,
+                &mut state.v,
+                &f,
+                self.inv_mass(),
+                &mut held,
+            );
+        }
+        for (m, h) in mask.iter_mut().zip(&held) {
+            if *h {
+                *m = 0.0;
+            }
+        }
     }
 
     fn assemble_elements(

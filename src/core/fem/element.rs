@@ -92,11 +92,37 @@ fn frob(a: &DMat3, b: &DMat3) -> f64 {
     a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
 }
 
-/// `J^(-2/3)` as `1/∛J²` (finite for negative `J`, infinite at 0).
+/// Below this volume ratio the isochoric term is evaluated at `J = J_MIN` (its `J^(-2/3)`
+/// frozen): an element squashed flat or inverted — by a contact projection, a hard drag, an
+/// explicit step — keeps finite energy and forces, and the volumetric term `D (J − 1)²`
+/// pushes it back. Above it the energy is exactly the seed's.
+pub const J_MIN: f64 = 0.1;
+
+/// `J^(-2/3)` (as `1/∛J²`), frozen below [`J_MIN`].
 #[inline]
 fn j_two_thirds(j: f64) -> f64 {
-    let c = j.cbrt();
+    let c = j.max(J_MIN).cbrt();
     1.0 / (c * c)
+}
+
+/// The cofactor matrix `cof F = J F⁻ᵀ = [b × c, c × a, a × b]` for columns `a, b, c`: the
+/// derivative of `det F`, finite for flat and inverted `F`.
+#[inline]
+pub fn cofactor(f: &DMat3) -> DMat3 {
+    let (a, b, c) = (f.x_axis, f.y_axis, f.z_axis);
+    DMat3::from_cols(b.cross(c), c.cross(a), a.cross(b))
+}
+
+/// `d(cof F)` for a change `dF`.
+#[inline]
+fn cofactor_differential(f: &DMat3, df: &DMat3) -> DMat3 {
+    let (a, b, c) = (f.x_axis, f.y_axis, f.z_axis);
+    let (da, db, dc) = (df.x_axis, df.y_axis, df.z_axis);
+    DMat3::from_cols(
+        db.cross(c) + b.cross(dc),
+        dc.cross(a) + c.cross(da),
+        da.cross(b) + a.cross(db),
+    )
 }
 
 /// The seed's neo-Hookean energy density constants: `C` (isochoric, Pa) and `D` (volumetric,
@@ -110,7 +136,7 @@ pub struct NeoHookeanConstants {
 }
 
 impl NeoHookeanConstants {
-    /// `ψ(F)`, finite for inverted elements (real cube root); `+∞` only at `J = 0`.
+    /// `ψ(F)`; finite for flat and inverted elements (see [`J_MIN`]).
     pub fn energy_density(&self, f: &DMat3) -> f64 {
         let j = f.determinant();
         let i1 = frob(f, f);
@@ -128,20 +154,34 @@ impl NeoHookeanConstants {
         }
     }
 
-    /// The first Piola–Kirchhoff stress `P = ∂ψ/∂F`.
+    /// The first Piola–Kirchhoff stress `P = ∂ψ/∂F` (with `J G = cof F`, finite everywhere).
     pub fn stress(&self, f: &DMat3) -> DMat3 {
         let j = f.determinant();
-        let g = f.inverse().transpose();
+        let cof = cofactor(f);
         let a = j_two_thirds(j);
         let i1 = frob(f, f);
-        *f * (2.0 * self.c * a) + g * (-2.0 / 3.0 * self.c * a * i1 + 2.0 * self.d * (j - 1.0) * j)
+        let iso = if j > J_MIN {
+            -2.0 / 3.0 * self.c * a * i1 / j
+        } else {
+            0.0
+        };
+        *f * (2.0 * self.c * a) + cof * (iso + 2.0 * self.d * (j - 1.0))
     }
 
     /// `dP = (∂P/∂F) : dF`.
     pub fn stress_differential(&self, f: &DMat3, df: &DMat3) -> DMat3 {
         let j = f.determinant();
-        let g = f.inverse().transpose();
-        self.stress_differential_with(f, &g, j, df)
+        if j > J_MIN {
+            let g = cofactor(f) * (1.0 / j);
+            return self.stress_differential_with(f, &g, j, df);
+        }
+        // Frozen isochoric factor: P = 2C a F + 2D (J − 1) cof F.
+        let a = j_two_thirds(j);
+        let cof = cofactor(f);
+        let dj = frob(&cof, df);
+        *df * (2.0 * self.c * a)
+            + cof * (2.0 * self.d * dj)
+            + cofactor_differential(f, df) * (2.0 * self.d * (j - 1.0))
     }
 
     #[inline]
@@ -170,7 +210,27 @@ impl NeoHookeanConstants {
         // δ = ⅔ C a I₁ − 2D (J − 1) J: a few flops per entry instead of matrix products
         // (`stress_differential` is the general form; the tests check both).
         let j = f.determinant();
-        let g = f.inverse().transpose();
+        if j <= J_MIN {
+            // Flat, inverted or nearly so: the general differential, column by column.
+            let mut h = [[0.0; 9]; 9];
+            for q in 0..9 {
+                let mut e = DMat3::ZERO;
+                e.col_mut(q / 3)[q % 3] = 1.0;
+                let dp = self.stress_differential(f, &e);
+                for (p, row) in h.iter_mut().enumerate() {
+                    row[q] = dp.col(p / 3)[p % 3];
+                }
+            }
+            for p in 0..9 {
+                for q in p + 1..9 {
+                    let s = 0.5 * (h[p][q] + h[q][p]);
+                    h[p][q] = s;
+                    h[q][p] = s;
+                }
+            }
+            return h;
+        }
+        let g = cofactor(f) * (1.0 / j);
         let a = j_two_thirds(j);
         let i1 = frob(f, f);
         let (c, d) = (self.c, self.d);

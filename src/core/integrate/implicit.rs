@@ -10,9 +10,11 @@ use crate::math::{Scalar, Vector};
 /// and the state's particles found (or the error saying which is missing), the matrix rebuilt
 /// when the system's structure changed, and the free-particle mask filled (a free particle
 /// without a valid mass is a reported solver failure).
+#[allow(clippy::too_many_arguments)]
 fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     kind: IntegratorKind,
     sys: &'a Sys,
+    t: Scalar,
     h: Scalar,
     state: &'a mut S,
     slot: &'a mut Option<SpringMatrix>,
@@ -38,6 +40,7 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     if !lin.free_mask(mask) {
         return Err(StepError::SolverFailed(kind));
     }
+    lin.hold_contacts(t, ps, mask);
     Ok((lin, ps, a))
 }
 
@@ -136,6 +139,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
         let (lin, ps, a) = implicit_setup(
             IntegratorKind::ImplicitDampingTrapezoid,
             sys,
+            t,
             h,
             state,
             &mut self.a,
@@ -190,6 +194,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         let (lin, ps, a) = implicit_setup(
             IntegratorKind::LinearlyImplicitEuler,
             sys,
+            t,
             h,
             state,
             &mut self.a,
@@ -372,7 +377,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         state: &mut S,
     ) -> Result<Scalar, StepError> {
         let kind = IntegratorKind::BackwardEuler;
-        let (lin, ps, a) = implicit_setup(kind, sys, h, state, &mut self.a, &mut self.mask)?;
+        let (lin, ps, a) = implicit_setup(kind, sys, t, h, state, &mut self.a, &mut self.mask)?;
         let n = lin.particles();
         for b in [
             &mut self.x0,
