@@ -198,7 +198,11 @@ fn bunny_trace(kind: IntegratorKind, ground: bool, kick: f64) {
                 e.kinetic,
                 sim.system.tets.energy(&sim.state.x),
                 sim.system.tets.inverted(&sim.state.x),
-                sim.state.x.iter().map(|x| x.y as f64).fold(f64::MAX, f64::min),
+                sim.state
+                    .x
+                    .iter()
+                    .map(|x| x.y as f64)
+                    .fold(f64::MAX, f64::min),
                 sim.state.x.iter().filter(|x| (x.y as f64) <= 1e-6).count()
             );
         }

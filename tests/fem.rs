@@ -5,6 +5,10 @@
 //! relative, the issue's) hold in the default `f32` build too. Central differences have
 //! truncation error `O(ε²)` and round-off `O(u/ε)`; `ε = 1e-5` relative puts both near 1e-10.
 
+// Small dense matrices read best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+#![allow(clippy::unnecessary_cast)]
+
 use bevy_soft_body::core::fem::element::{
     NeoHookeanConstants, RestShape, consistent_mass, element_energy, element_forces,
     element_stiffness, lumped_mass, project_psd9,
@@ -124,16 +128,16 @@ fn stress_differential_and_hessian_match_differences_of_the_stress() {
 fn random_tet(r: &mut Rng) -> ([DVec3; 4], RestShape) {
     loop {
         let x = [r.v() * 0.1, r.v() * 0.1, r.v() * 0.1, r.v() * 0.1];
-        if let Some(s) = RestShape::new(x) {
-            if s.volume > 1e-5 {
-                return (x, s);
-            }
+        if let Some(s) = RestShape::new(x)
+            && s.volume > 1e-5
+        {
+            return (x, s);
         }
         let y = [x[0], x[1], x[3], x[2]];
-        if let Some(s) = RestShape::new(y) {
-            if s.volume > 1e-5 {
-                return (y, s);
-            }
+        if let Some(s) = RestShape::new(y)
+            && s.volume > 1e-5
+        {
+            return (y, s);
         }
     }
 }

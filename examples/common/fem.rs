@@ -32,6 +32,7 @@ pub struct FemSpec {
 }
 
 /// Spawns the body from [`FemSpec`] when its mesh has loaded (once).
+#[allow(clippy::too_many_arguments)]
 pub fn spawn_when_loaded(
     mut commands: Commands,
     spec: Option<Res<FemSpec>>,
@@ -92,8 +93,8 @@ pub fn spawn_when_loaded(
             .ok()?;
         let (mut v, f) = read_obj(&path, &text).map_err(|e| error!("{e}")).ok()?;
         for p in &mut v {
-            for c in 0..3 {
-                p[c] = p[c] * spec.scale as f32 + spec.offset[c] as f32;
+            for (c, o) in p.iter_mut().zip(spec.offset) {
+                *c = *c * spec.scale as f32 + o as f32;
             }
         }
         Some((v, f))

@@ -244,6 +244,7 @@ impl Collider {
     /// instead of letting the step drive them in and projecting them out afterwards, which
     /// pumps energy into stiff elements. Marks them in `held` and sets their velocity to the
     /// collider's.
+    #[allow(clippy::too_many_arguments)]
     pub fn hold(
         &self,
         t: Scalar,

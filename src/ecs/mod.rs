@@ -9,4 +9,4 @@ mod spawn;
 
 pub use components::*;
 pub use plugin::{BodySim, SoftBodyPlugin, SoftBodySet};
-pub use spawn::SpawnSoftBody;
+pub use spawn::{DisplayMesh, SpawnSoftBody};

@@ -31,7 +31,7 @@ pub trait SpawnSoftBody {
         mesh: &crate::core::fem::mesh::TetMesh,
         material: crate::core::fem::NeoHookean,
         body: SoftBody,
-        display: Option<(&[[f32; 3]], &[[u32; 3]])>,
+        display: Option<DisplayMesh>,
     ) -> Result<Entity, SceneError>;
 
     /// Spawns a collider described as in scenes (a ground plane from
@@ -70,7 +70,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
         mesh: &crate::core::fem::mesh::TetMesh,
         material: crate::core::fem::NeoHookean,
         body: SoftBody,
-        display: Option<(&[[f32; 3]], &[[u32; 3]])>,
+        display: Option<DisplayMesh>,
     ) -> Result<Entity, SceneError> {
         let scene = mesh.to_scene("elastic body", material);
         let (root, ids) = spawn_scene(self, &scene, body)?;
@@ -91,6 +91,9 @@ impl SpawnSoftBody for Commands<'_, '_> {
         spawn_scene(self, scene, body).map(|(root, _)| root)
     }
 }
+
+/// A display mesh to skin onto a tet body: vertices at rest and triangles.
+pub type DisplayMesh<'a> = (&'a [[f32; 3]], &'a [[u32; 3]]);
 
 /// Spawns a scene; returns the root and the particle entities in scene order.
 fn spawn_scene(

@@ -92,17 +92,19 @@ pub(crate) fn build(app: &mut App) {
         .add_systems(PostUpdate, (sync_surfaces, collider_meshes, sync_skinned));
 }
 
+type SkinnedItem<'a> = (
+    Entity,
+    &'a SkinnedSurface,
+    &'a BodySim,
+    Option<&'a SkinnedDisplay>,
+    Option<&'a mut Visibility>,
+);
+
 fn sync_skinned(
     mut commands: Commands,
     meshes: Option<ResMut<Assets<Mesh>>>,
     materials: Option<ResMut<Assets<StandardMaterial>>>,
-    mut bodies: Query<(
-        Entity,
-        &SkinnedSurface,
-        &BodySim,
-        Option<&SkinnedDisplay>,
-        Option<&mut Visibility>,
-    )>,
+    mut bodies: Query<SkinnedItem>,
     mut displays: Query<(&Mesh3d, &mut Visibility), Without<SkinnedSurface>>,
 ) {
     let (Some(mut meshes), Some(mut materials)) = (meshes, materials) else {

@@ -25,6 +25,9 @@
 //! inverted element (the volume term pushes it back); the *barrier* energy used by Newton's
 //! line search is `+∞` for `J ≤ 0` instead.
 
+// Small dense matrices (9×9, 12×12) read best with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{DMat3, DVec3};
 
 /// Local vertex pairs of a tet's six edges.
@@ -335,7 +338,8 @@ fn cholesky_ok(h: &[[f64; 9]; 9]) -> bool {
         for k in 0..j {
             d -= l[j][k] * l[j][k];
         }
-        if !(d > 0.0) {
+        // Not `d <= 0.0`: a NaN pivot must fail too.
+        if d.is_nan() || d <= 0.0 {
             return false;
         }
         let d = d.sqrt();

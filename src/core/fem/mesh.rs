@@ -218,7 +218,7 @@ fn finish(
             .length()
             .max((x[2] - x[0]).length())
             .max((x[3] - x[0]).length());
-        if !(vol > 1e-12 * scale.powi(3)) {
+        if vol.is_nan() || vol <= 1e-12 * scale.powi(3) {
             return Err(err(
                 tets[k].1,
                 format!(

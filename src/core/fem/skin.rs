@@ -188,12 +188,12 @@ impl Skinning {
     }
 }
 
+/// Vertices and counter-clockwise triangles of a display mesh.
+pub type TriangleMesh = (Vec<[f32; 3]>, Vec<[u32; 3]>);
+
 /// Reads the vertices and triangles of a Wavefront `.obj` (`v` and `f` lines; polygons are
 /// fanned into triangles; texture and normal indices are ignored). Errors name the line.
-pub fn read_obj(
-    file: &str,
-    text: &str,
-) -> Result<(Vec<[f32; 3]>, Vec<[u32; 3]>), super::mesh::MeshError> {
+pub fn read_obj(file: &str, text: &str) -> Result<TriangleMesh, super::mesh::MeshError> {
     let err = |line: usize, message: String| super::mesh::MeshError {
         file: file.to_string(),
         line,
