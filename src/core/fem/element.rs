@@ -28,7 +28,7 @@
 // Small dense matrices (9×9, 12×12) read best with explicit indices.
 #![allow(clippy::needless_range_loop)]
 
-use glam::{DMat3, DVec3};
+pub use glam::{DMat3, DVec3};
 
 /// Local vertex pairs of a tet's six edges.
 pub const EDGES: [(usize, usize); 6] = [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)];

@@ -591,6 +591,74 @@ impl TetMesh {
         s + "End\n"
     }
 
+    /// Writes Gmsh `.msh` text, format 2.2 (`version` 2) or 4.1 (any other), ASCII, node tags
+    /// from 1 (round trips through [`TetMesh::from_gmsh`]).
+    pub fn to_gmsh(&self, version: u32) -> String {
+        let n = self.vertices.len();
+        let m = self.tets.len();
+        let mut s = String::new();
+        if version == 2 {
+            s += "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n";
+            s += &format!("{n}\n");
+            for (i, v) in self.vertices.iter().enumerate() {
+                s += &format!("{} {} {} {}\n", i + 1, v[0], v[1], v[2]);
+            }
+            s += &format!("$EndNodes\n$Elements\n{m}\n");
+            for (k, t) in self.tets.iter().enumerate() {
+                s += &format!(
+                    "{} 4 2 0 1 {} {} {} {}\n",
+                    k + 1,
+                    t[0] + 1,
+                    t[1] + 1,
+                    t[2] + 1,
+                    t[3] + 1
+                );
+            }
+        } else {
+            s += "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n";
+            s += &format!("1 {n} 1 {n}\n3 1 0 {n}\n");
+            for i in 0..n {
+                s += &format!("{}\n", i + 1);
+            }
+            for v in &self.vertices {
+                s += &format!("{} {} {}\n", v[0], v[1], v[2]);
+            }
+            s += &format!("$EndNodes\n$Elements\n1 {m} 1 {m}\n3 1 4 {m}\n");
+            for (k, t) in self.tets.iter().enumerate() {
+                s += &format!(
+                    "{} {} {} {} {}\n",
+                    k + 1,
+                    t[0] + 1,
+                    t[1] + 1,
+                    t[2] + 1,
+                    t[3] + 1
+                );
+            }
+        }
+        s + "$EndElements\n"
+    }
+
+    /// Writes TetGen `.node` and `.ele` text, indices from 1 (round trips through
+    /// [`TetMesh::from_tetgen`]).
+    pub fn to_tetgen(&self) -> (String, String) {
+        let mut node = format!("{} 3 0 0\n", self.vertices.len());
+        for (i, v) in self.vertices.iter().enumerate() {
+            node += &format!("{} {} {} {}\n", i + 1, v[0], v[1], v[2]);
+        }
+        let mut ele = format!("{} 4 0\n", self.tets.len());
+        for (k, t) in self.tets.iter().enumerate() {
+            ele += &format!(
+                "{} {} {} {} {}\n",
+                k + 1,
+                t[0] + 1,
+                t[1] + 1,
+                t[2] + 1,
+                t[3] + 1
+            );
+        }
+        (node, ele)
+    }
+
     /// Faces that belong to exactly one tet, wound counter-clockwise seen from outside.
     pub fn boundary(&self) -> Vec<[u32; 3]> {
         let mut faces: HashMap<[u32; 3], ([u32; 3], u32)> = HashMap::new();
