@@ -133,7 +133,7 @@ fn mesh_readers_survive_damaged_files() {
     run(
         "medit",
         &[m.to_medit()],
-        3000,
+        20_000,
         &|t| match TetMesh::from_medit("f.mesh", t) {
             Ok(mesh) => {
                 check_mesh(&mesh);
@@ -148,7 +148,7 @@ fn mesh_readers_survive_damaged_files() {
     run(
         "gmsh",
         &[m.to_gmsh(2), m.to_gmsh(4)],
-        3000,
+        20_000,
         &|t| match TetMesh::from_gmsh("f.msh", t) {
             Ok(mesh) => {
                 check_mesh(&mesh);
