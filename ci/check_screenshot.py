@@ -1,5 +1,9 @@
 #!/usr/bin/env python3
 """Checks a cloth_sphere screenshot: the cloth and the sphere must both be visible.
+With `--body`, checks a finite-element screenshot (fem_bunny, fem_armadillo) instead: the
+skinned display mesh's beige (sRGB 0.78, 0.72, 0.62), lit — red ≥ green ≥ blue, red 12–70
+above blue, red > 120 — must cover more than 3 % of the frame right of the panel (10.9 % in
+docs/fem_bunny.png, 5.5 % in docs/fem_armadillo.png; 0 % in an empty frame or fem_beam's blue).
 
 Pixel statistics against the known colours of the scene (no image libraries needed):
 - cloth: the red material (sRGB 0.85, 0.25, 0.22), lit: red clearly above green and blue;
@@ -70,5 +74,24 @@ def main(path):
     return 0 if ok else 1
 
 
+def body(path):
+    w, h, bpp, rows = read_png(path)
+    hits = total = 0
+    for line in rows:
+        for x in range(380, w):
+            r, g, b = line[x * bpp], line[x * bpp + 1], line[x * bpp + 2]
+            total += 1
+            if r > 120 and r >= g >= b and 12 <= r - b <= 70:
+                hits += 1
+    share = 100 * hits / total
+    print(f"{path}: {w}x{h}, body {share:.2f} % of the frame right of the panel")
+    if share <= 3.0:
+        print("FAIL: the body needs > 3 % of those pixels")
+        return 1
+    return 0
+
+
 if __name__ == "__main__":
+    if sys.argv[1] == "--body":
+        sys.exit(body(sys.argv[2]))
     sys.exit(main(sys.argv[1]))

@@ -12,8 +12,8 @@ use bevy_soft_body::core::driver::StepPolicy;
 use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::ecs::*;
 
-/// Runs three bodies (a chain, a 6×6 cloth with the swinging sphere, a 3×3×3 jelly on the
-/// ground) with `kind` at h = 1/256 s for 250 fixed frames of 1/64 s — 1000 steps — and
+/// Runs four bodies (a chain, a 6×6 cloth with the swinging sphere, a 3×3×3 jelly and a
+/// 48-tet neo-Hookean box on the ground) with `kind` at h = 1/256 s for 250 fixed frames of 1/64 s — 1000 steps — and
 /// hashes every particle's position and velocity bits (FNV-1a), body by body.
 fn run(kind: IntegratorKind, threads: Option<usize>) -> u64 {
     let mut app = App::new();
@@ -40,6 +40,21 @@ fn run(kind: IntegratorKind, threads: Option<usize>) -> u64 {
             ..Default::default()
         })
         .unwrap(),
+        // A soft neo-Hookean box (48 tets) dropped on the ground: element forces, contacts
+        // held inside implicit steps, the sparse Cholesky.
+        {
+            let mut s = bevy_soft_body::core::fem::mesh::TetMesh::tet_box([0.2; 3], [2, 2, 2])
+                .transformed(1.0, [2.0, 0.1, 0.0])
+                .to_scene(
+                    "box",
+                    bevy_soft_body::core::fem::NeoHookean {
+                        young: 1e4,
+                        ..Default::default()
+                    },
+                );
+            s.colliders.push(build::ground(0.0, 0.0, 0.5));
+            s
+        },
     ];
     let body = SoftBody {
         integrator: kind,
