@@ -24,6 +24,11 @@ fn quick_work_precision_orders_match_theory() {
                 continue;
             }
             let measured = study::measured_order(&points, kind, floor, 0.1);
+            if std::env::var("STUDY_POINTS").is_ok() {
+                for p in points.iter().filter(|p| p.method == kind) {
+                    println!("  {:?}", p);
+                }
+            }
             let required = F64 || (problem != Problem::Cloth && kind.order() <= 2);
             println!(
                 "{:<16} {:<34} measured {:>6} theory {}",

@@ -193,7 +193,9 @@ pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
     integrator: Box<dyn Integrator<S, Sys>>,
     backup: S,
     energy_bound: Option<Scalar>,
-    start_time: Scalar,
+    /// The time in f64: frame ends and substep lengths are computed from it, so frames stay
+    /// exactly `frame_dt` long however late (an f32 clock at 10⁴ s resolves only 1 ms).
+    time64: f64,
 }
 
 impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
@@ -214,7 +216,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             integrator,
             backup,
             energy_bound,
-            start_time: 0.0,
+            time64: 0.0,
         }
     }
 
@@ -266,16 +268,20 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     }
 
     /// End time of frame `k` (computed from the frame index, so time never drifts).
-    fn frame_end(&self, k: u64) -> Scalar {
-        self.start_time + (k as f64 * self.config.frame_dt) as Scalar
+    fn frame_end(&self, k: u64) -> f64 {
+        k as f64 * self.config.frame_dt
     }
 
     /// Advances one frame in substeps that land exactly on its end.
     pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
         let t_end = self.frame_end(self.frame + 1);
+        if self.time != self.time64 as Scalar {
+            // Someone set `time`: follow it.
+            self.time64 = self.time as f64;
+        }
         // The last good state is the one delivered at the end of the previous frame: substeps
         // of a diverging frame may already be far from it while still finite.
-        let t_start = self.time;
+        let t_start = self.time64;
         self.backup.copy_from(&self.state);
         let h_pol = self.step_size();
         let mut rep = FrameReport {
@@ -283,16 +289,16 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             h_min: Scalar::INFINITY,
             h_max: 0.0,
         };
-        while self.time < t_end {
-            let remaining = t_end - self.time;
+        while self.time64 < t_end {
+            let remaining = t_end - self.time64;
             // Within 0.1 % of the end: take the remainder rather than leave a sliver (the
             // slides' `min(dt_max, 1.001 (t_frame − t))`, landing exactly).
-            let (h, last) = if remaining <= h_pol * 1.001 {
-                (remaining, true)
+            let (h, last) = if remaining <= h_pol as f64 * 1.001 {
+                (remaining as Scalar, true)
             } else {
                 (h_pol, false)
             };
-            let t = self.time;
+            let t = self.time64 as Scalar;
             self.system.apply_constraints(t, &mut self.state);
             let fail = |reason, h| Divergence {
                 frame: self.frame,
@@ -305,23 +311,31 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                 Ok(taken) => taken,
                 Err(e) => {
                     self.state.copy_from(&self.backup);
-                    self.time = t_start;
+                    self.time64 = t_start;
+                    self.time = t_start as Scalar;
                     return Err(fail(DivergenceReason::Step(e), h));
                 }
             };
-            let t_new = if last && taken >= h { t_end } else { t + taken };
+            let t_new64 = if last && taken >= h {
+                t_end
+            } else {
+                self.time64 + taken as f64
+            };
+            let t_new = t_new64 as Scalar;
             self.system.apply_constraints(t_new, &mut self.state);
             self.system.resolve_contacts(t_new, taken, &mut self.state);
             if !self.state.is_finite() {
                 self.state.copy_from(&self.backup);
-                self.time = t_start;
+                self.time64 = t_start;
+                self.time = t_start as Scalar;
                 return Err(fail(DivergenceReason::NonFinite, taken));
             }
             if let Some(bound) = self.energy_bound {
                 let k = self.system.guard_energy(&self.state);
                 if k.is_nan() || k > bound {
                     self.state.copy_from(&self.backup);
-                    self.time = t_start;
+                    self.time64 = t_start;
+                    self.time = t_start as Scalar;
                     return Err(fail(
                         DivergenceReason::EnergyBlowup {
                             energy: k as f64,
@@ -331,6 +345,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                     ));
                 }
             }
+            self.time64 = t_new64;
             self.time = t_new;
             rep.substeps += 1;
             rep.h_min = rep.h_min.min(taken);
