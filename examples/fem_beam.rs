@@ -47,7 +47,9 @@ fn main() {
     };
     let mut app = common::app("fem_beam", &args);
     app.add_systems(Startup, move |mut c: Commands| {
-        let mesh = TetMesh::beam(LENGTH, SIDE, 40, 4).transformed(1.0, [-0.5, HEIGHT, 0.0]);
+        let mesh = TetMesh::beam(LENGTH, SIDE, 40, 4)
+            .unwrap()
+            .transformed(1.0, [-0.5, HEIGHT, 0.0]);
         let root = c
             .spawn_tet_body(&mesh, MATERIAL, body.clone(), None)
             .expect("a valid beam");

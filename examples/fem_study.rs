@@ -21,7 +21,7 @@ use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::core::particles::ParticleModel;
 
 fn cantilever(n: usize, m: usize, length: f64, side: f64, mat: NeoHookean) -> (f64, usize) {
-    let mesh = TetMesh::beam(length, side, n, m);
+    let mesh = TetMesh::beam(length, side, n, m).unwrap();
     let scene = mesh.to_scene("beam", mat);
     let (mut model, state) = scene.build().unwrap();
     for (i, p) in scene.particles.iter().enumerate() {

@@ -44,6 +44,7 @@ fn run(kind: IntegratorKind, threads: Option<usize>) -> u64 {
         // held inside implicit steps, the sparse Cholesky.
         {
             let mut s = bevy_soft_body::core::fem::mesh::TetMesh::tet_box([0.2; 3], [2, 2, 2])
+                .unwrap()
                 .transformed(1.0, [2.0, 0.1, 0.0])
                 .to_scene(
                     "box",

@@ -381,7 +381,9 @@ fn rest_shapes_of_zero_or_negative_volume_are_refused_with_their_index() {
     assert!(t.push([0, 1, 2, 3], ok, &bad).is_err());
     assert!(t.push([0, 1, 2, 3], ok, &m).is_ok());
     // Through a scene: the error names the tet.
-    let mut scene = TetMesh::tet_box([1.0, 1.0, 1.0], [1, 1, 1]).to_scene("box", m);
+    let mut scene = TetMesh::tet_box([1.0, 1.0, 1.0], [1, 1, 1])
+        .unwrap()
+        .to_scene("box", m);
     scene.tets[3].vertices.swap(0, 1);
     let e = scene.build().unwrap_err().to_string();
     println!("{e}");
@@ -397,7 +399,9 @@ use bevy_soft_body::core::particles::ParticleModel;
 
 /// A 2×1×1 box of 12 tets, one corner pinned, deformed by a random field.
 fn deformed_box() -> (ParticleModel, ParticleState) {
-    let scene = TetMesh::tet_box([0.2, 0.1, 0.1], [2, 1, 1]).to_scene("box", NeoHookean::default());
+    let scene = TetMesh::tet_box([0.2, 0.1, 0.1], [2, 1, 1])
+        .unwrap()
+        .to_scene("box", NeoHookean::default());
     let (mut model, mut state) = scene.build().unwrap();
     model.pin(0, state.x[0]);
     let mut r = Rng(5);
@@ -564,7 +568,7 @@ fn shipped_meshes_load_with_the_documented_counts_and_closed_outward_boundaries(
     let m = TetMesh::from_medit("b", &read("bunny_coarse.mesh")).unwrap();
     assert!((m.volume() - 0.19326634100305262).abs() < 1e-9);
     // Procedural boxes too.
-    let b = TetMesh::beam(1.0, 0.1, 10, 2);
+    let b = TetMesh::beam(1.0, 0.1, 10, 2).unwrap();
     check_boundary(&b, &b.boundary());
     assert!((b.volume() - 0.01).abs() < 1e-14);
 }
@@ -666,7 +670,7 @@ fn every_format_reads_the_same_mesh() {
 
 #[test]
 fn malformed_mesh_files_give_errors_with_file_and_line() {
-    let m = TetMesh::tet_box([1.0; 3], [1, 1, 1]);
+    let m = TetMesh::tet_box([1.0; 3], [1, 1, 1]).unwrap();
     let good = m.to_medit();
     let lines: Vec<&str> = good.lines().collect();
     let with = |k: usize, new: &str| {
@@ -813,7 +817,7 @@ use bevy_soft_body::core::integrate::IntegratorKind;
 /// nearly a static Newton solve; stops when the tip moves by < 1e-4 of its deflection).
 fn cantilever_tip(n: usize, m: usize, mat: NeoHookean) -> f64 {
     let length = 1.0;
-    let mesh = TetMesh::beam(length, 0.1, n, m);
+    let mesh = TetMesh::beam(length, 0.1, n, m).unwrap();
     let scene = mesh.to_scene("beam", mat);
     let (mut model, state) = scene.build().unwrap();
     for (i, p) in scene.particles.iter().enumerate() {
@@ -1020,4 +1024,52 @@ fn a_bunny_dropped_on_the_ground_lands_without_inverting_and_settles() {
         assert!(worst.1 as f64 <= 0.05 * e0 as f64, "{}", worst.1);
         assert!(ymin >= -1e-6 && (e.kinetic as f64) < 5.0);
     }
+}
+
+#[test]
+fn huge_requests_are_refused_before_anything_is_allocated() {
+    use bevy_soft_body::core::build;
+    // 10⁶ particles are within the 4·10⁶ limit; 10⁹ are refused with a message, and so are
+    // counts whose product overflows.
+    for (what, r) in [
+        (
+            "tet box 10⁹",
+            TetMesh::tet_box([1.0; 3], [999, 999, 999]).map(|_| ()),
+        ),
+        (
+            "tet box overflow",
+            TetMesh::tet_box([1.0; 3], [usize::MAX; 3]).map(|_| ()),
+        ),
+        (
+            "beam",
+            TetMesh::beam(1.0, 0.1, 1 << 20, 1 << 10).map(|_| ()),
+        ),
+        (
+            "flat box",
+            TetMesh::tet_box([1.0, 0.0, 1.0], [1, 1, 1]).map(|_| ()),
+        ),
+        (
+            "NaN box",
+            TetMesh::tet_box([f64::NAN, 1.0, 1.0], [1, 1, 1]).map(|_| ()),
+        ),
+        (
+            "cloth 10⁸",
+            build::cloth(&build::ClothParams::default().resized(10_000, 10_000)).map(|_| ()),
+        ),
+        (
+            "chain 10⁹",
+            build::chain(&build::ChainParams {
+                particles: 1_000_000_000,
+                ..Default::default()
+            })
+            .map(|_| ()),
+        ),
+    ] {
+        let e = r.expect_err(what);
+        println!("{what}: {e}");
+        assert!(!e.0.is_empty());
+    }
+    // A million-vertex box is handled (built, not refused): 99³ cells → 10⁶ vertices.
+    let m = TetMesh::tet_box([1.0; 3], [99, 99, 99]).unwrap();
+    assert_eq!(m.vertices.len(), 1_000_000);
 }

@@ -35,7 +35,9 @@ fn body(kind: IntegratorKind) -> SoftBody {
 }
 
 fn block() -> TetMesh {
-    TetMesh::tet_box([0.3, 0.2, 0.2], [3, 2, 2]).transformed(1.0, [0.0, 1.0, 0.0])
+    TetMesh::tet_box([0.3, 0.2, 0.2], [3, 2, 2])
+        .unwrap()
+        .transformed(1.0, [0.0, 1.0, 0.0])
 }
 
 /// Explicit methods need steps below the block's fastest period (E = 200 kPa, 0.1 m cells:

@@ -124,7 +124,7 @@ fn run(name: &str, seeds: &[String], cases: usize, f: &dyn Fn(&str) -> bool) {
 }
 
 fn small_mesh() -> TetMesh {
-    TetMesh::tet_box([1.0, 0.5, 0.5], [2, 1, 1])
+    TetMesh::tet_box([1.0, 0.5, 0.5], [2, 1, 1]).unwrap()
 }
 
 #[test]

@@ -711,9 +711,28 @@ impl TetMesh {
     }
 
     /// A box `[0, size]` of `cells` cubes per axis, each split into six tets around its main
-    /// diagonal (Kuhn/Freudenthal: conforming across cubes).
-    pub fn tet_box(size: [f64; 3], cells: [usize; 3]) -> Self {
+    /// diagonal (Kuhn/Freudenthal: conforming across cubes). More vertices than
+    /// [`MAX_PARTICLES`](crate::core::scene::MAX_PARTICLES), or a size that is not positive and
+    /// finite, is refused before anything is allocated.
+    pub fn tet_box(
+        size: [f64; 3],
+        cells: [usize; 3],
+    ) -> Result<Self, crate::core::build::BuildError> {
         let [nx, ny, nz] = cells.map(|c| c.max(1));
+        let limit = crate::core::scene::MAX_PARTICLES;
+        let count = (nx as u128 + 1)
+            .saturating_mul(ny as u128 + 1)
+            .saturating_mul(nz as u128 + 1);
+        if count > limit as u128 {
+            return Err(crate::core::build::BuildError(format!(
+                "tet box: {nx}×{ny}×{nz} cells need {count} vertices, more than the limit of {limit}"
+            )));
+        }
+        if !size.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return Err(crate::core::build::BuildError(format!(
+                "tet box: size {size:?} must be positive and finite"
+            )));
+        }
         let idx = |i: usize, j: usize, k: usize| ((i * (ny + 1) + j) * (nz + 1) + k) as u32;
         let mut vertices = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
         for i in 0..=nx {
@@ -755,15 +774,20 @@ impl TetMesh {
                 }
             }
         }
-        Self { vertices, tets }
+        Ok(Self { vertices, tets })
     }
 
     /// A beam along x: length `length`, square section of side `side`, `n` cells along its
     /// length and `m` across each side, with its clamped end at x = 0 and its section centred
     /// on the x axis.
-    pub fn beam(length: f64, side: f64, n: usize, m: usize) -> Self {
-        Self::tet_box([length, side, side], [n, m, m])
-            .transformed(1.0, [0.0, -side / 2.0, -side / 2.0])
+    pub fn beam(
+        length: f64,
+        side: f64,
+        n: usize,
+        m: usize,
+    ) -> Result<Self, crate::core::build::BuildError> {
+        Ok(Self::tet_box([length, side, side], [n, m, m])?
+            .transformed(1.0, [0.0, -side / 2.0, -side / 2.0]))
     }
 
     /// The mesh as a scene of one elastic body: one particle per vertex with its lumped mass
