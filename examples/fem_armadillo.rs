@@ -4,10 +4,11 @@
 //! one step per 60 Hz frame. Press N to switch to linearly implicit Euler and pull hard with
 //! the mouse: its single linearized step overshoots, the body's energy explodes, the
 //! divergence is detected and reported in the panel, and the body is held at its last good
-//! state (never drawn as NaN). Press N again (or B) to go back to backward Euler, which stays
-//! bounded under the same pull; R resets.
+//! state (never drawn as NaN). Y yanks it the same way every time (40 m/s sideways per metre
+//! of height, as `tests/fem_plugin.rs` does): linearly implicit Euler diverges within two
+//! frames, backward Euler rides it out. Press N again (or B) to go back to backward Euler; R resets.
 //!
-//! Keys: N (running) linearly implicit ↔ backward Euler, S skinned ↔ simulation mesh,
+//! Keys: Y yank, N (running) linearly implicit ↔ backward Euler, S skinned ↔ simulation mesh,
 //! Space pause, N (paused) step, R reset, G wireframe, E/T/M/K/A/I/D/B integrator;
 //! left drag pulls the nearest vertex with a spring, right drag or arrows orbit, wheel zoom.
 
@@ -41,6 +42,29 @@ fn main() {
         });
         common::stage(&mut c, Vec3::new(0.0, 0.8, 0.0), 2.8);
     })
-    .add_systems(Update, fem::spawn_when_loaded);
+    .add_systems(Update, (fem::spawn_when_loaded, yank));
     app.run();
+}
+
+/// Y: every free particle gets 40 m/s sideways per metre above the body's lowest point.
+fn yank(
+    input: Res<ButtonInput<KeyCode>>,
+    bodies: Query<&SoftBodyInitial>,
+    mut particles: Query<&mut Particle, Without<Pinned>>,
+) {
+    if !input.just_pressed(KeyCode::KeyY) {
+        return;
+    }
+    for init in &bodies {
+        let bottom = init
+            .particles
+            .iter()
+            .map(|p| p.1.y)
+            .fold(f32::MAX, f32::min);
+        for (e, _, _) in &init.particles {
+            if let Ok(mut p) = particles.get_mut(*e) {
+                p.velocity.x += 40.0 * (p.position.y - bottom);
+            }
+        }
+    }
 }

@@ -257,3 +257,71 @@ fn the_skinned_display_follows_the_body() {
         assert!((p[1] - o[1] - fall).abs() < 1e-3, "{o:?} {p:?} {fall}");
     }
 }
+
+#[test]
+fn a_yanked_stiff_armadillo_diverges_contained_with_linearly_implicit_euler_only() {
+    // 40 m/s per metre: at 20 (the core test's yank at h = 1/60) this h = 1/64 run, which
+    // also starts one frame later under gravity, stays bounded; LIE's limit lies in between.
+    const YANK: f32 = 40.0;
+    // The fem_armadillo example's Y key through the plugin: a sideways yank on the hung
+    // armadillo (E = 1 MPa, ν = 0.45), h = 1/64.
+    let text = std::fs::read_to_string("assets/meshes/armadillo_coarse.mesh").unwrap();
+    let mesh = TetMesh::from_medit("armadillo_coarse.mesh", &text).unwrap();
+    let mat = NeoHookean {
+        young: 1e6,
+        poisson: 0.45,
+        density: 1000.0,
+    };
+    for kind in [
+        IntegratorKind::LinearlyImplicitEuler,
+        IntegratorKind::BackwardEuler,
+    ] {
+        let mut app = app();
+        let m = mesh.clone();
+        let e = app
+            .world_mut()
+            .run_system_once(move |mut c: Commands| {
+                c.spawn_tet_body(&m, mat, body(kind), None).unwrap()
+            })
+            .unwrap();
+        app.update();
+        let parts: Vec<Entity> = app
+            .world()
+            .get::<BodyParticles>(e)
+            .unwrap()
+            .entities()
+            .to_vec();
+        let top = 0.95 * mesh.bounds().1[1] as f32;
+        for p in &parts {
+            let y = app.world().get::<Particle>(*p).unwrap().position.y;
+            if y > top {
+                app.world_mut().entity_mut(*p).insert(Pinned::here());
+            } else {
+                app.world_mut().get_mut::<Particle>(*p).unwrap().velocity.x += YANK * y;
+            }
+        }
+        let mut diverged = 0;
+        for _ in 0..120 {
+            app.update();
+            let msgs = app.world().resource::<Messages<SoftBodyDiverged>>();
+            diverged += msgs.iter_current_update_messages().count();
+            // Never a NaN in a component.
+            for p in &parts {
+                let q = app.world().get::<Particle>(*p).unwrap();
+                assert!(q.position.is_finite() && q.velocity.is_finite());
+            }
+        }
+        let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+        println!(
+            "{kind}: {diverged} divergence message(s), state {:?}",
+            st.state
+        );
+        if kind == IntegratorKind::LinearlyImplicitEuler {
+            assert_eq!(diverged, 1);
+            assert!(matches!(st.state, BodyState::Diverged(_)));
+        } else {
+            assert_eq!(diverged, 0);
+            assert_eq!(st.state, BodyState::Running);
+        }
+    }
+}
