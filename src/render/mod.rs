@@ -83,12 +83,15 @@ pub struct SkinnedSurface {
     pub vertices: Vec<Entity>,
 }
 
-/// The entity showing a body's [`SkinnedSurface`].
-#[derive(Component, Clone, Copy, Debug)]
+/// The entity showing a body's [`SkinnedSurface`] (set by the plugin).
+#[derive(Component, Reflect, Clone, Copy, Debug)]
+#[reflect(Component, Debug)]
 pub struct SkinnedDisplay(pub Entity);
 
 pub(crate) fn build(app: &mut App) {
     app.register_type::<SkinnedSurface>()
+        .register_type::<SkinnedDisplay>()
+        .register_type::<SurfaceVertices>()
         .add_systems(PostUpdate, (sync_surfaces, collider_meshes, sync_skinned));
 }
 
@@ -254,7 +257,8 @@ fn alpha(debug: &SoftBodyDebug, fixed: &Time<Fixed>) -> Option<f32> {
 /// Which particle entity each vertex of a body's surface mesh shows, fixed when the mesh is
 /// made, so particles added later (a mouse grab's handle) or despawned do not shift the
 /// surface: a vertex whose particle is gone keeps its last position.
-#[derive(Component, Clone, Debug)]
+#[derive(Component, Reflect, Clone, Debug)]
+#[reflect(Component, Debug)]
 pub struct SurfaceVertices(pub Vec<Entity>);
 
 type SurfaceItem<'a> = (
