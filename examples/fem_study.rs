@@ -18,61 +18,6 @@ use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::integrate::IntegratorKind;
-use bevy_soft_body::core::particles::ParticleModel;
-
-fn cantilever(n: usize, m: usize, length: f64, side: f64, mat: NeoHookean) -> (f64, usize) {
-    let mesh = TetMesh::beam(length, side, n, m).unwrap();
-    let scene = mesh.to_scene("beam", mat);
-    let (mut model, state) = scene.build().unwrap();
-    for (i, p) in scene.particles.iter().enumerate() {
-        if p.position[0] == 0.0 {
-            model.pin(i, state.x[i]);
-        }
-    }
-    let tets = model.tets.len();
-    let h = 5.0;
-    let mut sim = Simulation::new(
-        model,
-        state,
-        DriverConfig {
-            integrator: IntegratorKind::BackwardEuler,
-            policy: StepPolicy::Fixed { h },
-            frame_dt: h as f64,
-            energy_guard: None,
-            ..Default::default()
-        },
-    );
-    let t0 = std::time::Instant::now();
-    let mut frames = 0;
-    let mut last = 0.0;
-    // Tip deflection: mean y displacement of the free end's vertices.
-    let tip: Vec<usize> = (0..scene.particles.len())
-        .filter(|&i| (scene.particles[i].position[0] - length).abs() < 1e-9)
-        .collect();
-    let deflection = |sim: &Simulation<_, ParticleModel>| {
-        -tip.iter()
-            .map(|&i| sim.state.x[i].y as f64 - scene.particles[i].position[1])
-            .sum::<f64>()
-            / tip.len() as f64
-    };
-    for _ in 0..100 {
-        sim.advance_frame().unwrap();
-        frames += 1;
-        let w = deflection(&sim);
-        // At rest: the tip moved by less than 1e-4 of its deflection in a step (f32 positions
-        // near 1 m round off at 6e-8 m, 6e-6 of a 1 cm deflection).
-        if (w - last).abs() < 1e-4 * w.abs() {
-            break;
-        }
-        last = w;
-    }
-    eprintln!(
-        "{n}x{m}: {frames} frames, {} Newton iterations, {:.2} s",
-        sim.stats().newton_iterations,
-        t0.elapsed().as_secs_f64()
-    );
-    (deflection(&sim), tets)
-}
 
 /// The armadillo hung by the particles of its top 5 %, with a sideways kick of `kick` m/s on
 /// the rest, stepped at h = 1/60 with `kind` for `seconds`: (frames run, first divergence).
@@ -270,8 +215,20 @@ fn main() {
         println!("Euler–Bernoulli tip deflection {eb:.5} m");
         println!("| cells (length × side²) | tets | tip (m) | ratio to EB |");
         for (n, m) in [(10, 1), (20, 2), (40, 4), (60, 6), (80, 8)] {
-            let (d, tets) = cantilever(n, m, length, side, mat);
-            println!("| {n} × {m}² | {tets} | {d:.5} | {:.4} |", d / eb);
+            let t0 = std::time::Instant::now();
+            let c = bevy_soft_body::core::study::cantilever_tip(length, side, n, m, mat).unwrap();
+            eprintln!(
+                "{n}x{m}: {} frames, {} Newton iterations, {:.2} s",
+                c.frames,
+                c.newton_iterations,
+                t0.elapsed().as_secs_f64()
+            );
+            println!(
+                "| {n} × {m}² | {} | {:.5} | {:.4} |",
+                c.tets,
+                c.tip,
+                c.tip / eb
+            );
         }
     }
 }

@@ -812,52 +812,6 @@ fn skinning_reproduces_affine_motion_and_embeds_the_hires_bunny() {
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::integrate::IntegratorKind;
 
-/// Tip deflection of a beam of length 1 m and square section 0.1 m (cells `n × m × m`),
-/// clamped at x = 0, brought to rest under gravity by backward Euler with h = 5 s (each step
-/// nearly a static Newton solve; stops when the tip moves by < 1e-4 of its deflection).
-fn cantilever_tip(n: usize, m: usize, mat: NeoHookean) -> f64 {
-    let length = 1.0;
-    let mesh = TetMesh::beam(length, 0.1, n, m).unwrap();
-    let scene = mesh.to_scene("beam", mat);
-    let (mut model, state) = scene.build().unwrap();
-    for (i, p) in scene.particles.iter().enumerate() {
-        if p.position[0] == 0.0 {
-            model.pin(i, state.x[i]);
-        }
-    }
-    let tip: Vec<usize> = (0..scene.particles.len())
-        .filter(|&i| (scene.particles[i].position[0] - length).abs() < 1e-9)
-        .collect();
-    let h = 5.0;
-    let mut sim = Simulation::new(
-        model,
-        state,
-        DriverConfig {
-            integrator: IntegratorKind::BackwardEuler,
-            policy: StepPolicy::Fixed { h },
-            frame_dt: h as f64,
-            energy_guard: None,
-            ..Default::default()
-        },
-    );
-    let deflection = |s: &Simulation<ParticleState, ParticleModel>| {
-        -tip.iter()
-            .map(|&i| s.state.x[i].y as f64 - scene.particles[i].position[1])
-            .sum::<f64>()
-            / tip.len() as f64
-    };
-    let mut last = 0.0;
-    for _ in 0..50 {
-        sim.advance_frame().unwrap();
-        let w = deflection(&sim);
-        if (w - last).abs() < 1e-4 * w.abs() {
-            break;
-        }
-        last = w;
-    }
-    deflection(&sim)
-}
-
 #[test]
 fn cantilever_tip_deflection_converges_to_euler_bernoulli() {
     // Small strain: E = 150 MPa, ρ = 1000 kg/m³ give w L⁴/(8 E I) = 9.81 mm (strain ~1e-4).
@@ -872,7 +826,10 @@ fn cantilever_tip_deflection_converges_to_euler_bernoulli() {
     let eb = mat.density * 9.81 * a * a * l.powi(4) / (8.0 * mat.young * a.powi(4) / 12.0);
     let mut errors = vec![];
     for (n, m) in [(20, 2), (40, 4), (80, 8)] {
-        let w = cantilever_tip(n, m, mat);
+        // Backward Euler with h = 5 s until the tip rests (`study::cantilever_tip`).
+        let w = bevy_soft_body::core::study::cantilever_tip(1.0, 0.1, n, m, mat)
+            .unwrap()
+            .tip;
         let err = (w - eb).abs() / eb;
         println!(
             "{n}×{m}²: tip {:.3} mm, Euler–Bernoulli {:.3} mm, error {:.1} %",
