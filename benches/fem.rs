@@ -31,16 +31,7 @@ fn body(name: &str) -> (ParticleModel, ParticleState) {
         poisson: 0.45,
         density: 1000.0,
     };
-    let mut scene = mesh.to_scene(name, mat);
-    let top = mesh.bounds().1[1];
-    for p in &mut scene.particles {
-        if p.position[1] > 0.95 * top {
-            p.pinned = true;
-        } else {
-            p.velocity = [2.0 * p.position[1], 0.0, 0.0];
-        }
-    }
-    scene.build().unwrap()
+    build::hung_tet_body(&mesh, mat, 2.0).build().unwrap()
 }
 
 type Boxed = Box<dyn Integrator<ParticleState, ParticleModel>>;

@@ -29,16 +29,9 @@ pub fn armadillo(
 ) -> (u64, Option<String>, f64) {
     let text = std::fs::read_to_string("assets/meshes/armadillo_coarse.mesh").unwrap();
     let mesh = TetMesh::from_medit("armadillo_coarse.mesh", &text).unwrap();
-    let mut scene = mesh.to_scene("armadillo", mat);
-    let top = mesh.bounds().1[1];
-    for p in &mut scene.particles {
-        if p.position[1] > 0.95 * top {
-            p.pinned = true;
-        } else {
-            p.velocity = [kick * p.position[1], 0.0, 0.0];
-        }
-    }
-    let (model, state) = scene.build().unwrap();
+    let (model, state) = bevy_soft_body::core::build::hung_tet_body(&mesh, mat, kick)
+        .build()
+        .unwrap();
     let mut sim = Simulation::new(
         model,
         state,

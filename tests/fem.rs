@@ -857,16 +857,9 @@ fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64)
         poisson: 0.45,
         density: 1000.0,
     };
-    let mut scene = mesh.to_scene("armadillo", mat);
-    let top = mesh.bounds().1[1];
-    for p in &mut scene.particles {
-        if p.position[1] > 0.95 * top {
-            p.pinned = true;
-        } else {
-            p.velocity = [20.0 * p.position[1], 0.0, 0.0];
-        }
-    }
-    let (model, state) = scene.build().unwrap();
+    let (model, state) = bevy_soft_body::core::build::hung_tet_body(&mesh, mat, 20.0)
+        .build()
+        .unwrap();
     let mut sim = Simulation::new(
         model,
         state,

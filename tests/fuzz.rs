@@ -200,30 +200,43 @@ fn scene_reader_survives_damaged_json() {
     });
 }
 
-/// Writes the seed corpus of the cargo-fuzz targets (`cargo test --test fuzz -- --ignored`).
+/// The cargo-fuzz seed corpus in `fuzz/corpus/` is what the writers produce today (so the
+/// nightly fuzzers start from valid files of the current formats). `WRITE_FUZZ_CORPUS=1 cargo
+/// test --test fuzz` rewrites it.
 #[test]
-#[ignore]
-fn write_fuzz_corpus() {
+fn fuzz_corpus_is_current() {
     let m = small_mesh();
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
-    let put = |target: &str, name: &str, text: &str| {
-        let d = dir.join(target);
-        std::fs::create_dir_all(&d).unwrap();
-        std::fs::write(d.join(name), text).unwrap();
-    };
-    put("medit", "box.mesh", &m.to_medit());
-    put("gmsh", "box_v2.msh", &m.to_gmsh(2));
-    put("gmsh", "box_v4.msh", &m.to_gmsh(4));
     let (node, ele) = m.to_tetgen();
-    put("tetgen", "box.node_ele", &format!("{node}===\n{ele}"));
-    put(
-        "scene_json",
-        "pendulum.json",
-        &build::pendulum(1.0, 1.0, 100.0, 0.5).to_json(),
-    );
-    put(
-        "scene_json",
-        "box.json",
-        &m.to_scene("box", NeoHookean::default()).to_json(),
-    );
+    let seeds = [
+        ("medit", "box.mesh", m.to_medit()),
+        ("gmsh", "box_v2.msh", m.to_gmsh(2)),
+        ("gmsh", "box_v4.msh", m.to_gmsh(4)),
+        ("tetgen", "box.node_ele", format!("{node}===\n{ele}")),
+        (
+            "scene_json",
+            "pendulum.json",
+            build::pendulum(1.0, 1.0, 100.0, 0.5).to_json(),
+        ),
+        (
+            "scene_json",
+            "box.json",
+            m.to_scene("box", NeoHookean::default()).to_json(),
+        ),
+    ];
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus");
+    let write = std::env::var("WRITE_FUZZ_CORPUS").is_ok();
+    for (target, name, text) in seeds {
+        let path = dir.join(target).join(name);
+        if write {
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(&path, &text).unwrap();
+        }
+        let stored = std::fs::read_to_string(&path).unwrap_or_default();
+        assert_eq!(
+            stored,
+            text,
+            "{} is stale: run WRITE_FUZZ_CORPUS=1 cargo test --test fuzz",
+            path.display()
+        );
+    }
 }
