@@ -1,8 +1,11 @@
 //! Spring force kernel on a 64×64 cloth (structural + shear + flex = 24,060 springs): time per
-//! spring for the undamped and damped kernels and for a whole derivative evaluation.
+//! spring for the row kernel (undamped, damped), the one-loop reference kernel it replaced,
+//! and a whole derivative evaluation.
 //!
-//! `cargo bench --bench springs` (f32) and `cargo bench --bench springs --features f64`.
-//! Criterion reports throughput in elements (springs) per second; ns per spring = 1e9 / that.
+//! `cargo bench --bench springs` (f32) and `cargo bench --bench springs --features f64`;
+//! `THREADS=1 cargo bench --bench springs` runs the kernels on one thread (default: all
+//! cores). Criterion reports throughput in elements (springs) per second; ns per spring =
+//! 1e9 / that.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -30,6 +33,14 @@ fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
 }
 
 fn bench(c: &mut Criterion) {
+    let threads = std::env::var("THREADS")
+        .ok()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(0);
+    bevy_soft_body::core::kernels::with_threads(threads, || bench_on(c));
+}
+
+fn bench_on(c: &mut Criterion) {
     let prec = bevy_soft_body::math::PRECISION;
     let mut g = c.benchmark_group(format!("spring_kernel_64x64_{prec}"));
     for (name, damping) in [("undamped", 0.0), ("damped", 0.05)] {
@@ -48,6 +59,17 @@ fn bench(c: &mut Criterion) {
         });
     }
     let (model, state) = cloth(0.05);
+    let mut f = vec![Vector::ZERO; state.len()];
+    g.throughput(Throughput::Elements(model.springs.len() as u64));
+    g.bench_function("damped_reference", |b| {
+        b.iter(|| {
+            f.fill(Vector::ZERO);
+            model
+                .springs
+                .accumulate_reference(black_box(&state.x), black_box(&state.v), &mut f);
+            black_box(&f);
+        })
+    });
     let mut d = state.clone();
     g.throughput(Throughput::Elements(model.springs.len() as u64));
     g.bench_function("derivative", |b| {

@@ -16,7 +16,8 @@
 //! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b` (or a name), `--h STEP`, `--cfl NUMBER`,
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
-//! `--no-guard`, `--obj`, `--out DIR`, `--quiet`.
+//! `--no-guard`, `--obj`, `--out DIR`, `--quiet`, `--threads N` (threads for the force
+//! kernels of one body; default 0: all cores; results are the same bits for any N).
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -45,6 +46,7 @@ struct Args {
     obj: bool,
     out: Option<PathBuf>,
     quiet: bool,
+    threads: usize,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -64,6 +66,7 @@ fn parse_args() -> Result<Args, String> {
         obj: false,
         out: None,
         quiet: false,
+        threads: 0,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -105,6 +108,11 @@ fn parse_args() -> Result<Args, String> {
             "--obj" => a.obj = true,
             "--out" => a.out = Some(val("--out")?.into()),
             "--quiet" => a.quiet = true,
+            "--threads" => {
+                a.threads = val("--threads")?
+                    .parse()
+                    .map_err(|_| "--threads: not a count".to_string())?
+            }
             "--help" | "-h" => return Err(String::new()),
             other => return Err(format!("unknown option '{other}'")),
         }
@@ -152,7 +160,7 @@ fn main() {
             std::process::exit(if e.is_empty() { 0 } else { 1 });
         }
     };
-    let code = match run(&args) {
+    let code = match bevy_soft_body::core::kernels::with_threads(args.threads, || run(&args)) {
         Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e}");

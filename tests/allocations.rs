@@ -58,4 +58,27 @@ fn frames_allocate_nothing_after_the_first() {
         let n = ALLOCS.load(Ordering::Relaxed) - before;
         assert_eq!(n, 0, "{kind}: {n} allocations in 30 frames");
     }
+    // A body large enough for the force kernels to cut into chunks (64×64 cloth: ten chunks of
+    // springs), on two threads.
+    let scene = build::cloth(&build::ClothParams::default().resized(64, 64)).unwrap();
+    let (model, state) = scene.build().unwrap();
+    assert!(model.springs.rows().chunks() > 1);
+    let cfg = DriverConfig {
+        integrator: IntegratorKind::SymplecticEuler,
+        policy: StepPolicy::Fixed { h: 2e-4 },
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(model, state, cfg);
+    let n = bevy_soft_body::core::kernels::with_threads(2, move || {
+        sim.advance_frame().unwrap();
+        let before = ALLOCS.load(Ordering::Relaxed);
+        for _ in 0..10 {
+            sim.advance_frame().unwrap();
+        }
+        ALLOCS.load(Ordering::Relaxed) - before
+    });
+    assert_eq!(
+        n, 0,
+        "64×64 cloth, chunked kernels: {n} allocations in 10 frames"
+    );
 }

@@ -335,7 +335,7 @@ impl Linearization for ParticleModel {
             self.springs.accumulate_elastic(&state.x, f);
         }
         if !self.tets.is_empty() {
-            self.tets.accumulate(&state.x, f);
+            self.tets.accumulate_f64(&state.x, f);
         }
         let wc = self.wind_coefficient();
         let push = if wc > 0.0 {
@@ -476,7 +476,7 @@ impl Linearization for ParticleModel {
                 self.springs.accumulate_elastic(x, g);
             }
             if !self.tets.is_empty() {
-                self.tets.accumulate(x, g);
+                self.tets.accumulate_f64(x, g);
             }
             for gi in g.iter_mut() {
                 *gi *= -h;

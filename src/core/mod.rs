@@ -9,6 +9,7 @@ pub mod fem;
 pub mod forces;
 pub mod integrate;
 pub mod jacobian;
+pub mod kernels;
 pub mod motion;
 pub mod ode;
 pub mod particles;

@@ -151,7 +151,13 @@ pub(crate) fn slice_scale(y: &mut [Vector], a: Scalar) {
 }
 
 pub(crate) fn slice_finite(y: &[Vector]) -> bool {
-    y.iter().all(|v| v.is_finite())
+    // `v − v` is zero for a finite component and NaN for an infinite or NaN one, and a NaN
+    // survives the sum: one branch-free pass (the short-circuiting `all` does not vectorize).
+    let mut acc = Vector::ZERO;
+    for v in y {
+        acc += *v - *v;
+    }
+    acc.is_finite()
 }
 
 pub(crate) fn slice_norm2(y: &[Vector]) -> Scalar {

@@ -12,6 +12,7 @@ use element::{EDGES, NeoHookeanConstants, RestShape};
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+use std::sync::OnceLock;
 
 /// A neo-Hookean material as engineers give it.
 ///
@@ -127,6 +128,19 @@ pub struct Tets {
     /// For each tet, the index into `edges` of each local edge in [`EDGES`] order.
     slots: Vec<[u32; 6]>,
     edge_index: HashMap<(u32, u32), u32>,
+    /// The fast kernel's layout, built on the first evaluation after a change.
+    fast: LazyTetForces,
+}
+
+/// A [`TetForces`](crate::core::kernels::tets::TetForces) built when first needed; cloning or
+/// adding tets drops it.
+#[derive(Debug, Default)]
+struct LazyTetForces(OnceLock<crate::core::kernels::tets::TetForces>);
+
+impl Clone for LazyTetForces {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
 }
 
 fn d(v: Vector) -> DVec3 {
@@ -172,6 +186,7 @@ impl Tets {
             }
         }
         self.slots.push(slot);
+        self.fast = LazyTetForces::default();
         self.tets.push(PackedTet {
             v: vv,
             rest: shape,
@@ -219,8 +234,29 @@ impl Tets {
         t.v.map(|i| d(x[i as usize]))
     }
 
-    /// Adds the elastic forces of every tet into `f`.
+    /// Adds the elastic forces of every tet into `f`, with the fast kernel
+    /// ([`crate::core::kernels::tets`]) in the build's precision: equal to
+    /// [`Tets::accumulate_f64`] to that precision's round-off, and the same bits on any number
+    /// of threads.
+    ///
+    /// # Panics
+    /// If `x` and `f` differ in length or a tet refers past their end.
     pub fn accumulate(&self, x: &[Vector], f: &mut [Vector]) {
+        let fast = self
+            .fast
+            .0
+            .get_or_init(|| crate::core::kernels::tets::TetForces::new(&self.tets));
+        assert!(
+            f.len() == x.len() && fast.bound() <= x.len(),
+            "tets refer past the state, or state and forces differ in length"
+        );
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { fast.accumulate(x, f) }
+    }
+
+    /// Adds the elastic forces of every tet into `f`, element by element in f64 (the reference
+    /// kernel; implicit methods use it for their gradients).
+    pub fn accumulate_f64(&self, x: &[Vector], f: &mut [Vector]) {
         for t in &self.tets {
             let fe = element::element_forces(&t.material, &t.rest, Self::positions(t, x));
             for (a, fa) in fe.iter().enumerate() {

@@ -10,8 +10,10 @@
 //! Hooke stiffness and share one kernel (and one Jacobian). A damper along the spring adds
 //! `f_i = −b (n·(v_i − v_j)) n`.
 
+use crate::core::kernels::springs::SpringRows;
 use crate::math::{Scalar, Vector};
 use serde::{Deserialize, Serialize};
+use std::sync::OnceLock;
 
 /// How a spring's stiffness is given.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -57,6 +59,25 @@ pub struct Springs {
     damped: usize,
     /// One more than the largest particle index referenced (0 when empty).
     bound: usize,
+    /// The fast kernel's layout, built on the first evaluation after a change.
+    rows: LazyRows,
+}
+
+/// A [`SpringRows`] built when first needed; cloning or editing the springs drops it (it is
+/// rebuilt from the springs, never compared).
+#[derive(Debug, Default)]
+struct LazyRows(OnceLock<SpringRows>);
+
+impl Clone for LazyRows {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl PartialEq for LazyRows {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Springs {
@@ -86,6 +107,7 @@ impl Springs {
             self.damped += 1;
         }
         self.bound = self.bound.max(i.max(j) + 1);
+        self.rows = LazyRows::default();
     }
 
     /// Number of springs.
@@ -109,6 +131,7 @@ impl Springs {
         // Indices may change through this slice: the bound is recomputed on the next
         // `accumulate` (or exactly by `refresh`).
         self.bound = usize::MAX;
+        self.rows = LazyRows::default();
         &mut self.springs
     }
 
@@ -116,6 +139,7 @@ impl Springs {
     pub fn refresh(&mut self) {
         self.damped = self.springs.iter().filter(|s| s.damping != 0.0).count();
         self.bound = self.max_index();
+        self.rows = LazyRows::default();
     }
 
     /// Removes the spring at `index` (order of the others is kept).
@@ -145,12 +169,49 @@ impl Springs {
         );
     }
 
+    /// The fast kernel's layout (built now if the springs changed since the last call).
+    pub fn rows(&self) -> &SpringRows {
+        self.rows.0.get_or_init(|| SpringRows::new(&self.springs))
+    }
+
     /// Adds spring (and damper) forces into `f`. `x`, `v` and `f` have one entry per particle.
+    /// Uses the row kernel ([`crate::core::kernels::springs`]), in parallel for large bodies;
+    /// the result is the same bits on any number of threads, and equals
+    /// [`Springs::accumulate_reference`] to round-off.
     ///
     /// # Panics
     /// If the slices differ in length or a spring refers past their end (a model that passed
     /// `validate` never does).
     pub fn accumulate(&self, x: &[Vector], v: &[Vector], f: &mut [Vector]) {
+        let n = x.len();
+        assert!(
+            v.len() == n && f.len() == n,
+            "state and force arrays differ in length"
+        );
+        self.check_bound(n);
+        let v = (self.damped > 0).then_some(v);
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { self.rows().accumulate(x, v, f) }
+    }
+
+    /// Adds only the elastic part of the spring forces (dampers left out), for methods that
+    /// treat damping implicitly.
+    pub fn accumulate_elastic(&self, x: &[Vector], f: &mut [Vector]) {
+        assert!(
+            f.len() == x.len(),
+            "state and force arrays differ in length"
+        );
+        self.check_bound(x.len());
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { self.rows().accumulate(x, None, f) }
+    }
+
+    /// The reference kernel: one loop over the springs in their order, adding into both ends
+    /// (what [`Springs::accumulate`] computes, to round-off). Kept for tests and benchmarks.
+    ///
+    /// # Panics
+    /// As [`Springs::accumulate`].
+    pub fn accumulate_reference(&self, x: &[Vector], v: &[Vector], f: &mut [Vector]) {
         let n = x.len();
         assert!(
             v.len() == n && f.len() == n,
@@ -178,18 +239,6 @@ impl Springs {
                 *fp.add(j) -= fi;
             }
         }
-    }
-
-    /// Adds only the elastic part of the spring forces (dampers left out), for methods that
-    /// treat damping implicitly.
-    pub fn accumulate_elastic(&self, x: &[Vector], f: &mut [Vector]) {
-        assert!(
-            f.len() == x.len(),
-            "state and force arrays differ in length"
-        );
-        self.check_bound(x.len());
-        // SAFETY: lengths and index bound checked just above.
-        unsafe { self.elastic_unchecked(x, f) }
     }
 
     /// The undamped kernel: `f_i += d·k (L/l − 1)`, `f_j −= …`.

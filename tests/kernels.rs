@@ -1,0 +1,280 @@
+//! The fast force kernels against the simple references they replace, and the same bits on
+//! any number of threads.
+//!
+//! Round-off bounds: a particle's force is a sum of `m` terms, each computed with a few
+//! roundings; reordering the sum and the terms' operations changes the result by at most about
+//! `c · m · u · S`, with `u` the unit round-off and `S` the sum of the terms' magnitudes. The
+//! tests use `64 u S` (springs: terms of 5–10 roundings, each particle in about 13 springs
+//! here; tets: about 60 roundings per force, with `F` from edge vectors, which are exact in
+//! floating point for nearby particles), plus, for tets, the f64 reference's own round-off.
+
+#![allow(clippy::unnecessary_cast)]
+
+use bevy_soft_body::core::fem::element::{DVec3, element_forces};
+use bevy_soft_body::core::fem::mesh::TetMesh;
+use bevy_soft_body::core::fem::{NeoHookean, Tets};
+use bevy_soft_body::core::forces::{SpringLaw, Springs};
+use bevy_soft_body::core::kernels;
+use bevy_soft_body::math::{EPS, Scalar, Vector, to_f64};
+
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.f() * n as f64) as usize % n
+    }
+    fn vec(&mut self, s: f64) -> Vector {
+        Vector::new(
+            (s * (2.0 * self.f() - 1.0)) as Scalar,
+            (s * (2.0 * self.f() - 1.0)) as Scalar,
+            (s * (2.0 * self.f() - 1.0)) as Scalar,
+        )
+    }
+}
+
+/// A random network: `n` particles in a 1 m box moving at up to 1 m/s, `m` springs, most
+/// between near indices (as meshes are) and some between any two; duplicates, self springs,
+/// zero-length springs (two particles on one spot) and both laws; damped when `damped`.
+fn network(seed: u64, n: usize, m: usize, damped: bool) -> (Springs, Vec<Vector>, Vec<Vector>) {
+    let mut r = Rng(seed);
+    let mut x: Vec<Vector> = (0..n).map(|_| r.vec(1.0)).collect();
+    x[1] = x[0];
+    let v: Vec<Vector> = (0..n).map(|_| r.vec(1.0)).collect();
+    let mut s = Springs::new();
+    s.push(0, 1, 0.1, 50.0, 0.2, SpringLaw::Hooke);
+    s.push(2, 2, 0.1, 50.0, 0.2, SpringLaw::Hooke);
+    for k in 0..m {
+        let i = r.below(n);
+        let j = if k % 10 == 0 {
+            r.below(n)
+        } else {
+            (i + 1 + r.below(40)).min(n - 1)
+        };
+        let law = if k % 3 == 0 {
+            SpringLaw::Strain
+        } else {
+            SpringLaw::Hooke
+        };
+        let damping = if damped { 0.5 * r.f() } else { 0.0 };
+        let (rest, k) = ((0.05 + r.f()) as Scalar, (10.0 + 1000.0 * r.f()) as Scalar);
+        s.push(i, j, rest, k, damping as Scalar, law);
+    }
+    (s, x, v)
+}
+
+/// Per particle, the sum of the magnitudes of the spring forces on it (f64).
+fn spring_scale(s: &Springs, x: &[Vector], v: &[Vector]) -> Vec<f64> {
+    let mut scale = vec![0.0; x.len()];
+    for sp in s.as_slice() {
+        let d = DVec3::from_array(to_f64(x[sp.i as usize] - x[sp.j as usize]));
+        let w = DVec3::from_array(to_f64(v[sp.i as usize] - v[sp.j as usize]));
+        let l = d.length();
+        let mag = sp.k as f64 * (l - sp.rest as f64).abs() + sp.damping as f64 * w.length();
+        scale[sp.i as usize] += mag;
+        scale[sp.j as usize] += mag;
+    }
+    scale
+}
+
+fn worst(a: &[Vector], b: &[Vector], scale: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .zip(scale)
+        .map(|((a, b), s)| (*a - *b).length() as f64 / s.max(1e-30))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn row_kernel_equals_the_reference_to_round_off() {
+    for (seed, damped) in [(1, false), (2, true), (3, true)] {
+        // 20,000 springs: ten chunks, with spills between them.
+        let (s, x, v) = network(seed, 3000, 20_000, damped);
+        assert!(s.rows().chunks() >= 9, "{} chunks", s.rows().chunks());
+        assert!(s.rows().spills() > 0);
+        let mut fast = vec![Vector::ZERO; x.len()];
+        let mut reference = fast.clone();
+        s.accumulate(&x, &v, &mut fast);
+        s.accumulate_reference(&x, &v, &mut reference);
+        let err = worst(&fast, &reference, &spring_scale(&s, &x, &v));
+        println!("damped {damped}: worst |fast − reference| / S = {err:.2e}");
+        assert!(err <= 64.0 * EPS as f64, "{err:e}");
+        // The elastic part alone (implicit methods) against the undamped reference.
+        let mut elastic = vec![Vector::ZERO; x.len()];
+        s.accumulate_elastic(&x, &mut elastic);
+        let mut undamped = s.clone();
+        for sp in undamped.as_mut_slice() {
+            sp.damping = 0.0;
+        }
+        undamped.refresh();
+        let mut reference = vec![Vector::ZERO; x.len()];
+        undamped.accumulate_reference(&x, &v, &mut reference);
+        let err = worst(&elastic, &reference, &spring_scale(&undamped, &x, &v));
+        assert!(err <= 64.0 * EPS as f64, "elastic: {err:e}");
+    }
+}
+
+#[test]
+fn row_kernel_survives_edits_and_small_bodies() {
+    // One spring; then edits after the layout was built must be seen.
+    let mut s = Springs::new();
+    s.push(1, 0, 1.0, 10.0, 0.0, SpringLaw::Hooke);
+    let x = vec![Vector::ZERO, Vector::X * 2.0];
+    let v = vec![Vector::ZERO; 2];
+    let mut f = vec![Vector::ZERO; 2];
+    s.accumulate(&x, &v, &mut f);
+    // d = x1 − x0 = (2, 0, 0): f1 = −10 (2 − 1) d/|d| = (−10, 0, 0).
+    assert_eq!(f, vec![Vector::X * 10.0, -Vector::X * 10.0]);
+    s.as_mut_slice()[0].k = 20.0;
+    f.fill(Vector::ZERO);
+    s.accumulate(&x, &v, &mut f);
+    assert_eq!(f[0], Vector::X * 20.0);
+    s.push(0, 1, 3.0, 20.0, 0.0, SpringLaw::Hooke);
+    f.fill(Vector::ZERO);
+    s.accumulate(&x, &v, &mut f);
+    // The second spring is compressed by 1 m: it pushes back with 20 N, cancelling the first.
+    assert_eq!(f[0], Vector::ZERO);
+}
+
+/// A 10×10×10-cell box (6000 tets) deformed at random, with a few elements pushed flat or
+/// inverted, as an explicit step or a drag can leave them.
+fn deformed_box(seed: u64) -> (Tets, Vec<Vector>) {
+    let mesh = TetMesh::tet_box([0.1, 0.1, 0.1], [10, 10, 10]).unwrap();
+    let material = NeoHookean {
+        young: 1e5,
+        poisson: 0.4,
+        density: 1000.0,
+    };
+    let mut tets = Tets::new();
+    for t in &mesh.tets {
+        let rest = t.map(|i| DVec3::from_array(mesh.vertices[i as usize]));
+        tets.push(t.map(|i| i as usize), rest, &material).unwrap();
+    }
+    let mut r = Rng(seed);
+    let mut x: Vec<Vector> = mesh
+        .vertices
+        .iter()
+        .map(|p| bevy_soft_body::math::vec3(*p) + Vector::new(1.0, -2.0, 0.5))
+        .collect();
+    for xi in x.iter_mut() {
+        *xi += r.vec(0.003);
+    }
+    for k in 0..20 {
+        let i = r.below(x.len());
+        x[i] = x[(i + 1 + k) % x.len()];
+    }
+    (tets, x)
+}
+
+#[test]
+fn tet_kernel_equals_the_f64_reference_to_round_off() {
+    let (tets, x) = deformed_box(7);
+    let mut fast = vec![Vector::ZERO; x.len()];
+    let mut reference = fast.clone();
+    tets.accumulate(&x, &mut fast);
+    tets.accumulate_f64(&x, &mut reference);
+    assert!(
+        tets.inverted(&x) > 0,
+        "the test must include inverted elements"
+    );
+    // S per particle: Σ over its elements of |element force on it| (f64), plus the stress
+    // scale `2(C + D) |g| V` per element, which bounds the round-off of P near rest.
+    let mut scale = vec![0.0; x.len()];
+    for t in tets.as_slice() {
+        let xs = t.v.map(|i| DVec3::from_array(to_f64(x[i as usize])));
+        let fe = element_forces(&t.material, &t.rest, xs);
+        let stress = 2.0 * (t.material.c + t.material.d) * t.rest.volume;
+        for a in 0..4 {
+            scale[t.v[a] as usize] += fe[a].length() + stress * t.rest.grad[a].length();
+        }
+    }
+    let err = worst(&fast, &reference, &scale);
+    // The reference forms F from absolute positions (|x| up to 2.3 m, edges of 1 cm): its own
+    // round-off is about u_f64 · |x|/ℓ = 230 u_f64 larger, visible in the f64 build only.
+    let amplification = 2.3 / 0.01;
+    let bound = 64.0 * EPS as f64 + 64.0 * f64::EPSILON * amplification;
+    println!("worst |fast − reference| / S = {err:.2e} (bound {bound:.1e})");
+    assert!(err <= bound, "{err:e}");
+}
+
+#[cfg(feature = "parallel")]
+#[test]
+fn kernels_give_the_same_bits_on_one_and_two_threads() {
+    let (s, x, v) = network(4, 3000, 20_000, true);
+    let (tets, xt) = deformed_box(8);
+    let run = |threads| {
+        kernels::with_threads(threads, || {
+            assert_eq!(kernels::current_threads(), threads);
+            let mut f = vec![Vector::ZERO; x.len()];
+            s.accumulate(&x, &v, &mut f);
+            let mut g = vec![Vector::ZERO; xt.len()];
+            tets.accumulate(&xt, &mut g);
+            (f, g)
+        })
+    };
+    let bits = |a: &[Vector]| a.iter().map(|v| to_f64(*v)).collect::<Vec<_>>();
+    let (f1, g1) = run(1);
+    let (f2, g2) = run(2);
+    assert_eq!(bits(&f1), bits(&f2));
+    assert_eq!(bits(&g1), bits(&g2));
+}
+
+/// The bench cloth (64×64, ten chunks of springs) and a 6000-tet box through the whole driver:
+/// 200 symplectic Euler steps on one and on two threads end in the same bits.
+#[cfg(feature = "parallel")]
+#[test]
+fn a_simulation_is_the_same_bits_on_one_and_two_threads() {
+    use bevy_soft_body::prelude::*;
+    let cloth = build::cloth(&build::ClothParams::default().resized(64, 64)).unwrap();
+    let mesh = TetMesh::tet_box([0.1, 0.1, 0.1], [10, 10, 10]).unwrap();
+    let mut block = mesh.to_scene("box", NeoHookean::default());
+    block.gravity = [0.0, 0.0, -9.81];
+    for p in block.particles.iter_mut() {
+        p.pinned = p.position[0] == 0.0;
+    }
+    for (scene, h) in [(cloth, 2e-4), (block, 2e-4)] {
+        let run = |threads| {
+            kernels::with_threads(threads, || {
+                let (model, state) = scene.build().unwrap();
+                let cfg = DriverConfig {
+                    integrator: IntegratorKind::SymplecticEuler,
+                    policy: StepPolicy::Fixed { h },
+                    frame_dt: 0.01,
+                    ..Default::default()
+                };
+                let mut sim = Simulation::new(model, state, cfg);
+                sim.run(4, |_, _| {}).unwrap();
+                sim.state
+            })
+        };
+        let (a, b) = (run(1), run(2));
+        let bits = |s: &ParticleState| {
+            s.x.iter()
+                .chain(&s.v)
+                .map(|v| to_f64(*v))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&a), bits(&b), "{}", scene.name);
+    }
+}
+
+/// The tet kernel's `x^(−1/3)` against the library's `1/∛x` over the range it is used on
+/// (`J ≥ J_MIN = 0.1`, up to 10⁶): within 4 units of round-off.
+#[test]
+fn inverse_cube_root_is_accurate() {
+    use bevy_soft_body::core::kernels::tets::inv_cbrt;
+    let mut worst: f64 = 0.0;
+    let mut x = 0.1f64;
+    while x < 1e6 {
+        let fast = inv_cbrt(x as Scalar) as f64;
+        let exact = 1.0 / (x as Scalar as f64).cbrt();
+        worst = worst.max((fast - exact).abs() / exact);
+        x *= 1.0001;
+    }
+    println!("worst relative error {worst:.2e}");
+    assert!(worst <= 4.0 * EPS as f64, "{worst:e}");
+}
