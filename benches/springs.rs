@@ -14,6 +14,7 @@ use bevy_soft_body::core::ode::OdeSystem;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
+use std::time::{Duration, Instant};
 
 fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
     let p = build::ClothParams {
@@ -32,15 +33,22 @@ fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
     (model, state)
 }
 
-fn bench(c: &mut Criterion) {
+/// Times `iters` runs of `work` on a pool of `THREADS` threads (default: all cores).
+fn timed(iters: u64, mut work: impl FnMut() + Send) -> Duration {
     let threads = std::env::var("THREADS")
         .ok()
         .and_then(|t| t.parse().ok())
         .unwrap_or(0);
-    bevy_soft_body::core::kernels::with_threads(threads, || bench_on(c));
+    bevy_soft_body::core::kernels::with_threads(threads, || {
+        let t0 = Instant::now();
+        for _ in 0..iters {
+            work();
+        }
+        t0.elapsed()
+    })
 }
 
-fn bench_on(c: &mut Criterion) {
+fn bench(c: &mut Criterion) {
     let prec = bevy_soft_body::math::PRECISION;
     let mut g = c.benchmark_group(format!("spring_kernel_64x64_{prec}"));
     for (name, damping) in [("undamped", 0.0), ("damped", 0.05)] {
@@ -49,12 +57,14 @@ fn bench_on(c: &mut Criterion) {
         let mut f = vec![Vector::ZERO; state.len()];
         g.throughput(Throughput::Elements(n as u64));
         g.bench_function(name, |b| {
-            b.iter(|| {
-                f.fill(Vector::ZERO);
-                model
-                    .springs
-                    .accumulate(black_box(&state.x), black_box(&state.v), &mut f);
-                black_box(&f);
+            b.iter_custom(|iters| {
+                timed(iters, || {
+                    f.fill(Vector::ZERO);
+                    model
+                        .springs
+                        .accumulate(black_box(&state.x), black_box(&state.v), &mut f);
+                    black_box(&f);
+                })
             })
         });
     }
@@ -73,9 +83,11 @@ fn bench_on(c: &mut Criterion) {
     let mut d = state.clone();
     g.throughput(Throughput::Elements(model.springs.len() as u64));
     g.bench_function("derivative", |b| {
-        b.iter(|| {
-            model.derivative(0.0, black_box(&state), &mut d);
-            black_box(&d);
+        b.iter_custom(|iters| {
+            timed(iters, || {
+                model.derivative(0.0, black_box(&state), &mut d);
+                black_box(&d);
+            })
         })
     });
     g.finish();

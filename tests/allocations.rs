@@ -58,7 +58,7 @@ fn frames_allocate_nothing_after_the_first() {
         let n = ALLOCS.load(Ordering::Relaxed) - before;
         assert_eq!(n, 0, "{kind}: {n} allocations in 30 frames");
     }
-    // A body large enough for the force kernels to cut into chunks (64×64 cloth: ten chunks of
+    // A body large enough for the force kernels to cut into chunks (64×64 cloth: six chunks of
     // springs), on two threads.
     let scene = build::cloth(&build::ClothParams::default().resized(64, 64)).unwrap();
     let (model, state) = scene.build().unwrap();

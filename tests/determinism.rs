@@ -2,6 +2,8 @@
 //! the same inputs give bit-identical states after 1000 steps — for every integrator, with
 //! Bevy's multi-threaded task pool (bodies stepped in parallel) and with a single thread.
 #![cfg(feature = "plugin")]
+// Casts to f64 are no-ops in the f64 build.
+#![allow(clippy::unnecessary_cast)]
 
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::ecs::system::RunSystemOnce;
@@ -110,5 +112,77 @@ fn every_integrator_is_bitwise_deterministic_single_and_multi_threaded() {
         println!("{:<34} {a:016x}", kind.label());
         assert_eq!(a, b, "{kind}: two multi-threaded runs differ");
         assert_eq!(a, c, "{kind}: single-threaded run differs");
+    }
+}
+
+/// One large body whose forces are cut into chunks (a 48×48 cloth: three chunks of springs;
+/// a 1536-tet box: six chunks of elements) stepped with its kernels on one thread and on two
+/// (`SoftBodyPlugin::with_kernel_threads`): 200 fixed frames of symplectic Euler and RK4 end
+/// in the same bits.
+#[test]
+fn a_large_body_is_bitwise_the_same_on_one_and_two_kernel_threads() {
+    let run = |kind: IntegratorKind, threads: usize| -> Vec<u64> {
+        let mut app = App::new();
+        app.add_plugins((
+            MinimalPlugins,
+            TransformPlugin,
+            SoftBodyPlugin::default().with_kernel_threads(threads),
+        ))
+        .insert_resource(Time::<Fixed>::from_seconds(1.0 / 64.0))
+        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+        app.update();
+        assert_eq!(
+            app.world().resource::<SoftBodyKernelPool>().threads(),
+            threads
+        );
+        let cloth = build::cloth(&build::ClothParams::default().resized(48, 48)).unwrap();
+        let block = bevy_soft_body::core::fem::mesh::TetMesh::tet_box([0.4; 3], [8, 8, 4])
+            .unwrap()
+            .transformed(1.0, [2.0, 0.1, 0.0])
+            .to_scene(
+                "box",
+                bevy_soft_body::core::fem::NeoHookean {
+                    young: 2e3,
+                    ..Default::default()
+                },
+            );
+        let mut block = block;
+        block.colliders.push(build::ground(0.0, 0.0, 0.5));
+        let body = SoftBody {
+            integrator: kind,
+            step: StepPolicy::Fixed { h: 1.0 / 512.0 },
+            energy_guard: None,
+            ..Default::default()
+        };
+        let roots: Vec<Entity> = app
+            .world_mut()
+            .run_system_once(move |mut c: Commands| {
+                [&cloth, &block]
+                    .iter()
+                    .map(|s| c.spawn_soft_body(s, body.clone()).unwrap())
+                    .collect::<Vec<_>>()
+            })
+            .unwrap();
+        for _ in 0..200 {
+            app.update();
+        }
+        let w = app.world();
+        let mut bits = vec![];
+        for r in roots {
+            let sim = w.get::<BodySim>(r).unwrap().simulation().unwrap();
+            assert!(sim.system.is_chunked());
+            let state = &w.get::<SoftBodyStatus>(r).unwrap().state;
+            assert!(matches!(state, BodyState::Running), "{kind}: {state:?}");
+            for x in sim.state.x.iter().chain(&sim.state.v) {
+                bits.extend(x.to_array().map(|c| (c as f64).to_bits()));
+            }
+        }
+        bits
+    };
+    for kind in [IntegratorKind::SymplecticEuler, IntegratorKind::Rk4] {
+        assert!(
+            run(kind, 1) == run(kind, 2),
+            "{kind}: 1 and 2 threads differ"
+        );
     }
 }

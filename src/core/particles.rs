@@ -341,6 +341,12 @@ impl ParticleModel {
         }
     }
 
+    /// True when the force kernels cut this model into more than one chunk of work, so that
+    /// evaluating it on several threads pays ([`crate::core::kernels`]).
+    pub fn is_chunked(&self) -> bool {
+        self.springs.rows().chunks() > 1 || self.tets.len() > crate::core::kernels::tets::CHUNK_TETS
+    }
+
     /// Elastic energy of springs and tets.
     pub fn elastic_energy(&self, x: &[Vector]) -> Scalar {
         let mut e = self.springs.energy(x);

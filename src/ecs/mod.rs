@@ -8,5 +8,5 @@ pub(crate) mod plugin;
 mod spawn;
 
 pub use components::*;
-pub use plugin::{BodySim, SoftBodyPlugin, SoftBodySet};
+pub use plugin::{BodySim, SoftBodyKernelPool, SoftBodyPlugin, SoftBodySet};
 pub use spawn::{DisplayMesh, SpawnSoftBody};

@@ -20,6 +20,7 @@ use std::collections::HashMap;
 #[derive(Debug, Clone)]
 pub struct SoftBodyPlugin {
     schedule: InternedScheduleLabel,
+    kernel_threads: usize,
 }
 
 impl Default for SoftBodyPlugin {
@@ -33,7 +34,91 @@ impl SoftBodyPlugin {
     pub fn new(schedule: impl ScheduleLabel) -> Self {
         Self {
             schedule: schedule.intern(),
+            kernel_threads: 0,
         }
+    }
+
+    /// Threads that share the force evaluation of one large body (a cloth of thousands of
+    /// springs, a body of thousands of tets; small bodies always run on one thread): `0`, the
+    /// default, uses every core; `1` steps each body on one thread. Bodies are stepped in
+    /// parallel with each other either way, and the results are the same bits for any count.
+    /// Needs the `parallel` feature (on by default); without it every body uses one thread.
+    pub fn with_kernel_threads(mut self, threads: usize) -> Self {
+        self.kernel_threads = threads;
+        self
+    }
+}
+
+/// The thread pool large bodies' force kernels share (see
+/// [`SoftBodyPlugin::with_kernel_threads`]); `None`: one thread per body.
+#[derive(Resource, Clone, Default)]
+pub struct SoftBodyKernelPool {
+    #[cfg(feature = "parallel")]
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+}
+
+impl SoftBodyKernelPool {
+    /// A pool of `threads` threads (`0`: every core; `1`: none).
+    pub fn new(threads: usize) -> Self {
+        #[cfg(feature = "parallel")]
+        {
+            let threads = if threads == 0 {
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            } else {
+                threads
+            };
+            let pool = (threads > 1)
+                .then(|| {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .thread_name(|i| format!("soft-body kernels {i}"))
+                        .build()
+                        .ok()
+                })
+                .flatten()
+                .map(std::sync::Arc::new);
+            Self { pool }
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            let _ = threads;
+            Self {}
+        }
+    }
+
+    /// Number of threads a large body's kernels use.
+    pub fn threads(&self) -> usize {
+        #[cfg(feature = "parallel")]
+        {
+            self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            1
+        }
+    }
+
+    /// Advances `sim` one frame, on the pool when the body is large enough to be cut into
+    /// chunks.
+    fn advance(
+        &self,
+        sim: &mut Simulation<ParticleState, ParticleModel>,
+    ) -> Result<crate::core::driver::FrameReport, Divergence> {
+        #[cfg(feature = "parallel")]
+        if let Some(pool) = &self.pool
+            && sim.system.is_chunked()
+        {
+            return pool.install(|| sim.advance_frame());
+        }
+        sim.advance_frame()
+    }
+}
+
+impl std::fmt::Debug for SoftBodyKernelPool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SoftBodyKernelPool")
+            .field("threads", &self.threads())
+            .finish()
     }
 }
 
@@ -74,6 +159,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyClock>()
             .register_type::<SoftBodyInitial>()
             .init_resource::<SoftBodyClock>()
+            .insert_resource(SoftBodyKernelPool::new(self.kernel_threads))
             .add_message::<ResetSoftBodies>()
             .register_type::<crate::render::SoftBodySurface>()
             .register_type::<crate::render::SoftBodyDebug>()
@@ -653,6 +739,7 @@ fn prepare(
 
 fn step(
     clock: Res<SoftBodyClock>,
+    pool: Res<SoftBodyKernelPool>,
     debug: Res<crate::render::SoftBodyDebug>,
     mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
 ) {
@@ -676,7 +763,7 @@ fn step(
                 bs.prev_x.extend(sim.state.x.iter().map(|x| to_f32(*x)));
             }
             let start = std::time::Instant::now();
-            match sim.advance_frame() {
+            match pool.advance(sim) {
                 Ok(rep) => {
                     // Followers end the frame exactly on their target (the linear path's end,
                     // recomputed in floating point, can be off by an ulp).

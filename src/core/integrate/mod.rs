@@ -211,6 +211,7 @@ impl IntegratorKind {
                 Self::BackwardEuler => {
                     let mut m = BackwardEuler::default();
                     m.solver = LinearSolver::cholesky();
+                    m.reuse_factorization = true;
                     return Box::new(m);
                 }
                 _ => {}

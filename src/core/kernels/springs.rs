@@ -2,15 +2,20 @@
 //! round-off, two to three times faster, and parallel within one body.
 //!
 //! Each spring `(a, b)` is stored once in the row of its lower index `i = min(a, b)`, with
-//! `j = max(a, b)`; rows are in particle order and a row's springs in order of `j`. A row's
-//! force on `i` is summed in a register and stored once; only the `j` side is scattered. The
-//! one-loop kernel instead adds into `f[i]` for every spring, and consecutive springs of a
-//! mesh share `i`, so each iteration waited for the previous one's store.
+//! `j = max(a, b)`; rows are in particle order and a row's springs in order of `j`. One pass
+//! over the springs computes each force `f = c (x_i − x_j)` — the factor
+//! `c = k (L/l − 1) − b (n·v_r)/l` eight springs at a time with AVX where the processor has it,
+//! so square roots and divisions run eight wide — subtracts it from `f_j`, and sums the row's
+//! forces on `i` in a register: the running sum is stored to a per-particle buffer after every
+//! spring (no branch at row ends; the last store of a row holds its total), and each row total
+//! is added to `f_i` once at the end. The one-loop reference kernel instead adds into `f[i]`
+//! for every spring, and consecutive springs of a mesh share `i`, so each iteration waited
+//! for the previous one's store.
 //!
-//! Rows are cut into chunks of about [`CHUNK_SPRINGS`] springs. A chunk owns the particles
-//! from its first row up to the next chunk's first row and writes only those; a `j` beyond
-//! them goes to a spill slot, added after all chunks in a fixed order. So every particle's
-//! sum has the same order on any number of threads.
+//! Springs are cut into chunks of about [`CHUNK_SPRINGS`] springs, between rows. A chunk owns
+//! the particles from its first row up to the next chunk's first row and writes only those; a
+//! `j` beyond them goes to a spill slot, added after all chunks in a fixed order. So every
+//! particle's sum has the same order on any number of threads.
 //!
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
@@ -19,19 +24,14 @@ use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
 
-/// Springs per chunk, the unit of parallel work (about 10 µs of work: large enough that
+/// Springs per chunk, the unit of parallel work (about 5 µs of work: large enough that
 /// handing it to a thread costs little, small enough that two threads stay balanced).
-pub const CHUNK_SPRINGS: usize = 2048;
+pub const CHUNK_SPRINGS: usize = 4096;
 
-#[derive(Clone, Copy, Debug)]
-struct Row {
-    i: u32,
-    start: u32,
-    /// Springs `start..mid` write `f[j]`; `mid..end` write spill slots from `spill` on.
-    mid: u32,
-    end: u32,
-    spill: u32,
-}
+/// Flag bit: the spring continues its row (clear on a row's first spring).
+const KEEP: u32 = 1;
+/// Flag bit: the spring's `j` side goes to the chunk's next spill slot.
+const SPILL: u32 = 2;
 
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
@@ -42,17 +42,31 @@ struct Col {
     damping: Scalar,
 }
 
+#[derive(Clone, Copy, Debug)]
+struct Chunk {
+    /// Springs `s0..s1`.
+    s0: u32,
+    s1: u32,
+    /// Rows `r0..r1` of `row_i`.
+    r0: u32,
+    r1: u32,
+    /// First spill slot.
+    spill: u32,
+}
+
 /// Springs laid out by rows (see the module docs).
 #[derive(Debug)]
 pub struct SpringRows {
-    rows: Vec<Row>,
     cols: Vec<Col>,
-    /// Row ranges of the chunks.
-    chunks: Vec<(u32, u32)>,
+    /// The lower particle of each spring.
+    col_i: Vec<u32>,
+    /// [`KEEP`] and [`SPILL`] bits of each spring.
+    flags: Vec<u32>,
+    /// The particle of each row.
+    row_i: Vec<u32>,
+    chunks: Vec<Chunk>,
     /// The particle each spill slot is subtracted from, in slot order.
     spill_j: Vec<u32>,
-    /// The lower particle of each spring (for the coefficient pass).
-    col_i: Vec<u32>,
     scratch: Mutex<Scratch>,
 }
 
@@ -61,8 +75,8 @@ pub struct SpringRows {
 struct Scratch {
     /// Spill slots' forces.
     spill: Vec<Vector>,
-    /// Each spring's force factor `c`, `f_i = c (x_i − x_j)`.
-    coef: Vec<Scalar>,
+    /// Running row sums, by particle.
+    rowsum: Vec<Vector>,
 }
 
 impl SpringRows {
@@ -83,15 +97,13 @@ impl SpringRows {
             count[a + 1] += count[a];
         }
         let total = count[bound] as usize;
-        let mut cols = vec![
-            Col {
-                j: 0,
-                rest: 0.0,
-                k: 0.0,
-                damping: 0.0,
-            };
-            total
-        ];
+        let zero = Col {
+            j: 0,
+            rest: 0.0,
+            k: 0.0,
+            damping: 0.0,
+        };
+        let mut cols = vec![zero; total];
         let mut next = count.clone();
         for s in springs.iter().filter(|s| s.i != s.j) {
             let a = s.i.min(s.j) as usize;
@@ -103,27 +115,25 @@ impl SpringRows {
             };
             next[a] += 1;
         }
-        let mut rows = Vec::new();
+        let mut col_i = vec![0u32; total];
+        let mut flags = vec![KEEP; total];
+        let mut rows = Vec::new(); // (i, start, end)
         for a in 0..bound {
             let (start, end) = (count[a] as usize, count[a + 1] as usize);
             if end > start {
                 cols[start..end].sort_by_key(|c| c.j);
-                rows.push(Row {
-                    i: a as u32,
-                    start: start as u32,
-                    mid: end as u32,
-                    end: end as u32,
-                    spill: 0,
-                });
+                col_i[start..end].fill(a as u32);
+                flags[start] = 0;
+                rows.push((a as u32, start as u32, end as u32));
             }
         }
         // Chunks of about CHUNK_SPRINGS springs, cut between rows.
-        let mut chunks = Vec::new();
+        let mut cuts = Vec::new();
         let (mut first, mut acc) = (0usize, 0usize);
         for (r, row) in rows.iter().enumerate() {
-            acc += (row.end - row.start) as usize;
+            acc += (row.2 - row.1) as usize;
             if acc >= CHUNK_SPRINGS || r + 1 == rows.len() {
-                chunks.push((first as u32, r as u32 + 1));
+                cuts.push((first, r + 1));
                 first = r + 1;
                 acc = 0;
             }
@@ -131,31 +141,36 @@ impl SpringRows {
         // What each chunk owns: particles from its first row's up to the next chunk's first
         // row's (the last chunk: all the rest). Springs reaching beyond spill.
         let mut spill_j = Vec::new();
-        for (c, &(r0, r1)) in chunks.iter().enumerate() {
-            let own_end = chunks
-                .get(c + 1)
-                .map_or(u32::MAX, |&(next, _)| rows[next as usize].i);
-            for row in &mut rows[r0 as usize..r1 as usize] {
-                let cs = &cols[row.start as usize..row.end as usize];
-                row.mid = row.start + cs.partition_point(|c| c.j < own_end) as u32;
-                row.spill = spill_j.len() as u32;
-                spill_j.extend(cols[row.mid as usize..row.end as usize].iter().map(|c| c.j));
+        let mut chunks = Vec::new();
+        for (c, &(r0, r1)) in cuts.iter().enumerate() {
+            let own_end = cuts.get(c + 1).map_or(u32::MAX, |&(next, _)| rows[next].0);
+            let spill = spill_j.len() as u32;
+            let (s0, s1) = (rows[r0].1, rows[r1 - 1].2);
+            for s in s0 as usize..s1 as usize {
+                if cols[s].j >= own_end {
+                    flags[s] |= SPILL;
+                    spill_j.push(cols[s].j);
+                }
             }
-        }
-        let mut col_i = vec![0u32; cols.len()];
-        for r in &rows {
-            col_i[r.start as usize..r.end as usize].fill(r.i);
+            chunks.push(Chunk {
+                s0,
+                s1,
+                r0: r0 as u32,
+                r1: r1 as u32,
+                spill,
+            });
         }
         let scratch = Mutex::new(Scratch {
             spill: vec![Vector::ZERO; spill_j.len()],
-            coef: vec![0.0; cols.len()],
+            rowsum: vec![Vector::ZERO; bound],
         });
         Self {
-            rows,
             cols,
+            col_i,
+            flags,
+            row_i: rows.iter().map(|r| r.0).collect(),
             chunks,
             spill_j,
-            col_i,
             scratch,
         }
     }
@@ -176,20 +191,33 @@ impl SpringRows {
     /// `x`, `v` (when given) and `f` hold every particle any spring refers to.
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], v: Option<&[Vector]>, f: &mut [Vector]) {
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let Scratch { spill, coef } = &mut *guard;
-        let spill = SharedMut(spill.as_mut_ptr());
-        let coef = SharedMut(coef.as_mut_ptr());
-        let fp = SharedMut(f.as_mut_ptr());
+        let Scratch { spill, rowsum } = &mut *guard;
+        let out = Out {
+            f: SharedMut(f.as_mut_ptr()),
+            spill: SharedMut(spill.as_mut_ptr()),
+            rowsum: SharedMut(rowsum.as_mut_ptr()),
+        };
+        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        let avx = std::arch::is_x86_feature_detected!("avx");
         let job = |c: usize| {
-            let (r0, r1) = self.chunks[c];
-            let rows = &self.rows[r0 as usize..r1 as usize];
-            let (s0, s1) = (rows[0].start as usize, rows[rows.len() - 1].end as usize);
+            let ch = self.chunks[c];
             // SAFETY: indices are below the bound the caller guarantees; chunk `c` writes only
-            // its own coefficients, `f` at the particles it owns and its own spill slots
-            // (disjoint across chunks).
+            // `f` and the row sums at the particles it owns and its own spill slots (disjoint
+            // across chunks).
             unsafe {
-                self.coefficients(s0, s1, x, v, coef);
-                self.scatter(rows, x, coef, fp, spill);
+                let mut st = Walk {
+                    s: ch.s0 as usize,
+                    acc: Vector::ZERO,
+                    slot: ch.spill as usize,
+                };
+                #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+                if avx {
+                    self.walk_avx(&mut st, ch.s1 as usize, x, v, out);
+                }
+                self.walk(&mut st, ch.s1 as usize, x, v, out);
+                for &i in self.row_i.get_unchecked(ch.r0 as usize..ch.r1 as usize) {
+                    *out.f.ptr().add(i as usize) += *out.rowsum.ptr().add(i as usize);
+                }
             }
         };
         for_each_chunk(self.chunks.len(), job);
@@ -199,24 +227,28 @@ impl SpringRows {
         }
     }
 
-    /// For springs `s0..s1`, the factor `c` with `f_i = c (x_i − x_j)`: `k (L/l − 1)`, minus
-    /// `b (n·(v_i − v_j))/l` with a damper.
+    /// Applies the force `fi` of spring `s` (see the module docs).
     #[inline(always)]
-    unsafe fn coefficients(
-        &self,
-        s0: usize,
-        s1: usize,
-        x: &[Vector],
-        v: Option<&[Vector]>,
-        coef: SharedMut<Scalar>,
-    ) {
-        // SAFETY: as this function's; SSE is part of x86_64.
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
-        let mut s = unsafe { self.coefficients_sse(s0, s1, x, v, coef) };
-        #[cfg(not(all(target_arch = "x86_64", not(feature = "f64"))))]
-        let mut s = s0;
-        let cp = coef.ptr();
-        while s < s1 {
+    unsafe fn apply(&self, st: &mut Walk, s: usize, fi: Vector, out: Out) {
+        // SAFETY: `s` is in the chunk being walked; see `accumulate`.
+        unsafe {
+            let fl = *self.flags.get_unchecked(s);
+            st.acc = row_sum(st.acc, fl) + fi;
+            *out.rowsum.ptr().add(*self.col_i.get_unchecked(s) as usize) = st.acc;
+            if fl & SPILL == 0 {
+                *out.f.ptr().add(self.cols.get_unchecked(s).j as usize) -= fi;
+            } else {
+                *out.spill.ptr().add(st.slot) = fi;
+                st.slot += 1;
+            }
+        }
+    }
+
+    /// Springs `st.s..s1` one at a time: `c` as in the module docs, then [`Self::apply`].
+    #[inline(always)]
+    unsafe fn walk(&self, st: &mut Walk, s1: usize, x: &[Vector], v: Option<&[Vector]>, out: Out) {
+        while st.s < s1 {
+            let s = st.s;
             // SAFETY: `s < s1 ≤ cols.len()`; particle indices below the bound.
             unsafe {
                 let c = self.cols.get_unchecked(s);
@@ -224,7 +256,7 @@ impl SpringRows {
                 let j = c.j as usize;
                 let d = *x.get_unchecked(i) - *x.get_unchecked(j);
                 let l = d.length();
-                *cp.add(s) = match v {
+                let coef = match v {
                     Some(v) => {
                         let inv = if l > 0.0 { 1.0 / l } else { 0.0 };
                         let along = d.dot(*v.get_unchecked(i) - *v.get_unchecked(j)) * inv;
@@ -235,136 +267,145 @@ impl SpringRows {
                     None if l > 0.0 => c.k * (c.rest / l - 1.0),
                     None => 0.0,
                 };
+                self.apply(st, s, d * coef, out);
             }
-            s += 1;
+            st.s += 1;
         }
     }
 
-    /// The coefficient pass four springs at a time in SSE (the same operations as the scalar
-    /// loop, lane by lane, so the same bits); returns where the scalar loop takes over.
+    /// Eight springs at a time in AVX: the factors as [`Self::walk`] computes them, lane by
+    /// lane with the same operations (no fused multiply-add, so the same bits), then
+    /// [`Self::apply`] in order. Stops where fewer than eight springs are left.
     #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
-    #[inline(always)]
-    unsafe fn coefficients_sse(
+    #[target_feature(enable = "avx")]
+    unsafe fn walk_avx(
         &self,
-        s0: usize,
+        st: &mut Walk,
         s1: usize,
         x: &[Vector],
         v: Option<&[Vector]>,
-        coef: SharedMut<Scalar>,
-    ) -> usize {
+        out: Out,
+    ) {
         use std::arch::x86_64::*;
-        // Rows 0–3 of four lanes (x, y, z, w of four vectors) to three columns.
+        // Eight 4-lane rows (x, y, z, w of eight vectors) to four 8-lane columns: rows q and
+        // q + 4 share a 256-bit register, then the 4×4 transpose runs in both halves at once.
         #[inline(always)]
-        unsafe fn transpose(a: __m128, b: __m128, c: __m128, d: __m128) -> [__m128; 3] {
-            // SAFETY: SSE is part of x86_64.
+        fn transpose(r: &[__m128; 8]) -> [__m256; 4] {
+            // SAFETY: only inlined into `walk_avx`, which enables AVX.
             unsafe {
-                let t0 = _mm_unpacklo_ps(a, b); // a.x b.x a.y b.y
-                let t1 = _mm_unpacklo_ps(c, d); // c.x d.x c.y d.y
-                let t2 = _mm_unpackhi_ps(a, b); // a.z b.z a.w b.w
-                let t3 = _mm_unpackhi_ps(c, d); // c.z d.z c.w d.w
-                [
-                    _mm_movelh_ps(t0, t1),
-                    _mm_movehl_ps(t1, t0),
-                    _mm_movelh_ps(t2, t3),
-                ]
+                let a = _mm256_set_m128(r[4], r[0]);
+                let b = _mm256_set_m128(r[5], r[1]);
+                let c = _mm256_set_m128(r[6], r[2]);
+                let d = _mm256_set_m128(r[7], r[3]);
+                let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpacklo_ps(c, d));
+                let (t2, t3) = (_mm256_unpackhi_ps(a, b), _mm256_unpackhi_ps(c, d));
+                let lo = |p: __m256, q: __m256| {
+                    _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
+                };
+                let hi = |p: __m256, q: __m256| {
+                    _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
+                };
+                [lo(t0, t1), hi(t0, t1), lo(t2, t3), hi(t2, t3)]
             }
         }
-        let cp = coef.ptr();
-        let mut s = s0;
-        // SAFETY: `s + 3 < s1 ≤ cols.len()`; particle indices below the bound the caller
+        // SAFETY: `st.s + 7 < s1 ≤ cols.len()`; particle indices below the bound the caller
         // guarantees; `Vec3A` is one `__m128`.
         unsafe {
-            let zero = _mm_setzero_ps();
-            let one = _mm_set1_ps(1.0);
-            while s + 4 <= s1 {
+            let zero = _mm256_setzero_ps();
+            let one = _mm256_set1_ps(1.0);
+            let mut c = [0.0f32; 8];
+            while st.s + 8 <= s1 {
+                let s = st.s;
                 let cols = self.cols.as_ptr().add(s);
                 let ii = self.col_i.as_ptr().add(s);
-                let lane = |q: usize, a: &[Vector]| -> __m128 {
-                    let (i, j) = (*ii.add(q) as usize, (*cols.add(q)).j as usize);
-                    (*a.get_unchecked(i) - *a.get_unchecked(j)).into()
+                let diff = |a: &[Vector], q: usize| -> Vector {
+                    *a.get_unchecked(*ii.add(q) as usize)
+                        - *a.get_unchecked((*cols.add(q)).j as usize)
                 };
-                let [dx, dy, dz] = transpose(lane(0, x), lane(1, x), lane(2, x), lane(3, x));
-                // rest, k, damping of four springs: the Col rows transposed (j is lane 0).
-                let col = |q: usize| _mm_loadu_ps(cols.add(q) as *const f32);
-                let [_, rest, k] = transpose(col(0), col(1), col(2), col(3));
-                let dd = _mm_add_ps(
-                    _mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)),
-                    _mm_mul_ps(dz, dz),
+                let d: [Vector; 8] = std::array::from_fn(|q| diff(x, q));
+                let [dx, dy, dz, _] = transpose(&d.map(Into::into));
+                // (j, rest, k, damping) of eight springs, transposed.
+                let [_, rest, k, damping] = transpose(&std::array::from_fn(|q| {
+                    _mm_loadu_ps(cols.add(q) as *const f32)
+                }));
+                let dd = _mm256_add_ps(
+                    _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
+                    _mm256_mul_ps(dz, dz),
                 );
-                let l = _mm_sqrt_ps(dd);
-                let pos = _mm_cmpgt_ps(l, zero);
-                let out = match v {
+                let l = _mm256_sqrt_ps(dd);
+                let pos = _mm256_cmp_ps::<_CMP_GT_OQ>(l, zero);
+                let coef = match v {
                     Some(v) => {
-                        let [wx, wy, wz] =
-                            transpose(lane(0, v), lane(1, v), lane(2, v), lane(3, v));
-                        let inv = _mm_and_ps(_mm_div_ps(one, l), pos);
-                        let along = _mm_mul_ps(
-                            _mm_add_ps(
-                                _mm_add_ps(_mm_mul_ps(dx, wx), _mm_mul_ps(dy, wy)),
-                                _mm_mul_ps(dz, wz),
+                        let w: [__m128; 8] = std::array::from_fn(|q| diff(v, q).into());
+                        let [wx, wy, wz, _] = transpose(&w);
+                        let inv = _mm256_and_ps(_mm256_div_ps(one, l), pos);
+                        let along = _mm256_mul_ps(
+                            _mm256_add_ps(
+                                _mm256_add_ps(_mm256_mul_ps(dx, wx), _mm256_mul_ps(dy, wy)),
+                                _mm256_mul_ps(dz, wz),
                             ),
                             inv,
                         );
-                        let damping = _mm_set_ps(
-                            (*cols.add(3)).damping,
-                            (*cols.add(2)).damping,
-                            (*cols.add(1)).damping,
-                            (*cols.add(0)).damping,
+                        let neg_k = _mm256_xor_ps(k, _mm256_set1_ps(-0.0));
+                        let mag = _mm256_sub_ps(
+                            _mm256_mul_ps(neg_k, _mm256_sub_ps(l, rest)),
+                            _mm256_mul_ps(damping, along),
                         );
-                        let neg_k = _mm_xor_ps(k, _mm_set1_ps(-0.0));
-                        let mag = _mm_sub_ps(
-                            _mm_mul_ps(neg_k, _mm_sub_ps(l, rest)),
-                            _mm_mul_ps(damping, along),
-                        );
-                        _mm_mul_ps(mag, inv)
+                        _mm256_mul_ps(mag, inv)
                     }
                     None => {
-                        let r = _mm_div_ps(rest, l);
-                        _mm_and_ps(_mm_mul_ps(k, _mm_sub_ps(r, one)), pos)
+                        let r = _mm256_div_ps(rest, l);
+                        _mm256_and_ps(_mm256_mul_ps(k, _mm256_sub_ps(r, one)), pos)
                     }
                 };
-                _mm_storeu_ps(cp.add(s), out);
-                s += 4;
+                _mm256_storeu_ps(c.as_mut_ptr(), coef);
+                for q in 0..8 {
+                    self.apply(st, s + q, d[q] * c[q], out);
+                }
+                st.s += 8;
             }
         }
-        s
     }
+}
 
-    /// Adds `c (x_i − x_j)` into `f_i` (summed over the row in a register) and subtracts it
-    /// from `f_j` (or its spill slot).
-    #[inline(always)]
-    unsafe fn scatter(
-        &self,
-        rows: &[Row],
-        x: &[Vector],
-        coef: SharedMut<Scalar>,
-        f: SharedMut<Vector>,
-        spill: SharedMut<Vector>,
-    ) {
-        let (xp, cp, fp, sp) = (x.as_ptr(), coef.ptr(), f.ptr(), spill.ptr());
-        for r in rows {
-            // SAFETY: see `accumulate`.
-            unsafe {
-                let xi = *xp.add(r.i as usize);
-                let mut acc = Vector::ZERO;
-                for s in r.start as usize..r.mid as usize {
-                    let j = self.cols.get_unchecked(s).j as usize;
-                    let fi = (xi - *xp.add(j)) * *cp.add(s);
-                    acc += fi;
-                    *fp.add(j) -= fi;
-                }
-                let mut slot = r.spill as usize;
-                for s in r.mid as usize..r.end as usize {
-                    let j = self.cols.get_unchecked(s).j as usize;
-                    let fi = (xi - *xp.add(j)) * *cp.add(s);
-                    acc += fi;
-                    *sp.add(slot) = fi;
-                    slot += 1;
-                }
-                *fp.add(r.i as usize) += acc;
-            }
+/// The running row sum kept (`fl` has [`KEEP`]) or restarted, without a branch (rows end
+/// every few springs, too irregularly for a predictor).
+#[inline(always)]
+fn row_sum(acc: Vector, fl: u32) -> Vector {
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    {
+        use std::arch::x86_64::*;
+        let keep = 0u32.wrapping_sub(fl & KEEP) as i32;
+        // SAFETY: SSE2 is part of x86_64.
+        unsafe {
+            Vector::from(_mm_and_ps(
+                acc.into(),
+                _mm_castsi128_ps(_mm_set1_epi32(keep)),
+            ))
         }
     }
+    #[cfg(not(all(target_arch = "x86_64", not(feature = "f64"))))]
+    {
+        if fl & KEEP != 0 { acc } else { Vector::ZERO }
+    }
+}
+
+/// Where a chunk walk is.
+struct Walk {
+    /// Next spring.
+    s: usize,
+    /// The current row's running sum.
+    acc: Vector,
+    /// Next spill slot.
+    slot: usize,
+}
+
+/// The buffers a chunk writes.
+#[derive(Clone, Copy)]
+struct Out {
+    f: SharedMut<Vector>,
+    spill: SharedMut<Vector>,
+    rowsum: SharedMut<Vector>,
 }
 
 impl Clone for SpringRows {
@@ -375,11 +416,12 @@ impl Clone for SpringRows {
             .unwrap_or_else(|e| e.into_inner())
             .clone();
         Self {
-            rows: self.rows.clone(),
             cols: self.cols.clone(),
+            col_i: self.col_i.clone(),
+            flags: self.flags.clone(),
+            row_i: self.row_i.clone(),
             chunks: self.chunks.clone(),
             spill_j: self.spill_j.clone(),
-            col_i: self.col_i.clone(),
             scratch: Mutex::new(scratch),
         }
     }

@@ -21,7 +21,7 @@ use std::sync::Mutex;
 /// Elements per chunk of the element pass.
 pub const CHUNK_TETS: usize = 256;
 /// Particles per chunk of the gather pass.
-pub const CHUNK_PARTICLES: usize = 1024;
+pub const CHUNK_PARTICLES: usize = 256;
 
 #[derive(Clone, Copy, Debug)]
 struct Element {

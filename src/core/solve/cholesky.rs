@@ -53,6 +53,8 @@ pub struct SparseCholesky {
     rhs: Vec<f64>,
     xc: Vec<Vector>,
     q: Vec<Vector>,
+    /// True when `analysis.l_values` holds the factor of the last matrix solved with.
+    factored: bool,
     /// Symbolic analyses done so far (one per structure change).
     pub analyses: u64,
 }
@@ -223,7 +225,6 @@ impl SparseCholesky {
     /// Solves `A x = b` on the free degrees of freedom (`mask[i] = 1`); constrained entries of
     /// `x` keep their value and their coupling to free ones is moved to the right-hand side,
     /// exactly as [`super::Pcg::solve`] filters them, so both give the same answer.
-    #[allow(clippy::needless_range_loop)] // one index over parallel arrays
     pub fn solve(
         &mut self,
         a: &SpringMatrix,
@@ -231,7 +232,7 @@ impl SparseCholesky {
         x: &mut [Vector],
         mask: &[Scalar],
     ) -> PcgReport {
-        let n = a.len();
+        self.factored = false;
         if !self
             .analysis
             .as_ref()
@@ -240,31 +241,12 @@ impl SparseCholesky {
             self.analysis = Self::analyse(a, mask);
             self.analyses += 1;
         }
+        let Some(bnorm2) = self.right_hand_side(a, b, x, mask) else {
+            return failed();
+        };
         let Some(an) = self.analysis.as_mut() else {
             return failed();
         };
-        // Known values of constrained entries, moved to the right-hand side: b_f − A_fc x_c.
-        self.xc.resize(n, Vector::ZERO);
-        self.q.resize(n, Vector::ZERO);
-        for i in 0..n {
-            self.xc[i] = if mask[i] != 0.0 { Vector::ZERO } else { x[i] };
-        }
-        a.mul(&self.xc, &mut self.q);
-        self.rhs.resize(an.dim, 0.0);
-        let mut bnorm2 = 0.0f64;
-        for i in 0..n {
-            let c = an.free[i];
-            if c != u32::MAX {
-                let r = b[i] - self.q[i];
-                for k in 0..3 {
-                    self.rhs[3 * c as usize + k] = r[k] as f64;
-                }
-                bnorm2 += (b[i] * mask[i]).length_squared() as f64;
-            }
-        }
-        if !bnorm2.is_finite() {
-            return failed();
-        }
         // Values of the free-free upper triangle.
         self.values.clear();
         self.values.resize(an.row_idx.len(), 0.0);
@@ -306,18 +288,103 @@ impl SparseCholesky {
         let sym =
             SymbolicSparseColMatRef::new_checked(an.dim, an.dim, &an.col_ptr, None, &an.row_idx);
         let mat = SparseColMatRef::new(sym, &self.values);
-        let llt = match an.symbolic.factorize_numeric_llt::<f64>(
-            &mut an.l_values,
-            mat,
-            Side::Upper,
-            LltRegularization::default(),
-            Par::Seq,
-            MemStack::new(&mut an.buf),
-            Default::default(),
-        ) {
-            Ok(l) => l,
-            Err(_) => return failed(),
+        if an
+            .symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut an.l_values,
+                mat,
+                Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut an.buf),
+                Default::default(),
+            )
+            .is_err()
+        {
+            return failed();
+        }
+        self.factored = true;
+        self.substitute(a, b, x, mask, bnorm2)
+    }
+
+    /// Solves `A' x = b` with the factor of the last matrix `A'` [`SparseCholesky::solve`]
+    /// factored (a modified Newton step: no assembly, no factorization, two triangular
+    /// solves). `a` must be that same matrix (its structure is checked; its values give the
+    /// constrained entries' coupling and the reported residual). `None` when there is no
+    /// usable factor for this structure.
+    pub fn resolve(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+    ) -> Option<PcgReport> {
+        if !self.factored
+            || !self
+                .analysis
+                .as_ref()
+                .is_some_and(|an| an.dim > 0 && Self::matches(an, a, mask))
+        {
+            return None;
+        }
+        let Some(bnorm2) = self.right_hand_side(a, b, x, mask) else {
+            return Some(failed());
         };
+        Some(self.substitute(a, b, x, mask, bnorm2))
+    }
+
+    /// `b_f − A_fc x_c` into `rhs` (the known values of constrained entries moved to the
+    /// right-hand side); returns `‖b_f‖²`, `None` when not finite or not analysed.
+    #[allow(clippy::needless_range_loop)] // one index over parallel arrays
+    fn right_hand_side(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &[Vector],
+        mask: &[Scalar],
+    ) -> Option<f64> {
+        let n = a.len();
+        let an = self.analysis.as_ref()?;
+        self.xc.resize(n, Vector::ZERO);
+        self.q.resize(n, Vector::ZERO);
+        for i in 0..n {
+            self.xc[i] = if mask[i] != 0.0 { Vector::ZERO } else { x[i] };
+        }
+        a.mul(&self.xc, &mut self.q);
+        self.rhs.resize(an.dim, 0.0);
+        let mut bnorm2 = 0.0f64;
+        for i in 0..n {
+            let c = an.free[i];
+            if c != u32::MAX {
+                let r = b[i] - self.q[i];
+                for k in 0..3 {
+                    self.rhs[3 * c as usize + k] = r[k] as f64;
+                }
+                bnorm2 += (b[i] * mask[i]).length_squared() as f64;
+            }
+        }
+        bnorm2.is_finite().then_some(bnorm2)
+    }
+
+    /// Forward and back substitution with the stored factor, the free entries of `x` set from
+    /// the result, and the residual `‖b − A x‖` (filtered) for the report.
+    #[allow(clippy::needless_range_loop)] // one index over parallel arrays
+    fn substitute(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        bnorm2: f64,
+    ) -> PcgReport {
+        let n = a.len();
+        let Some(an) = self.analysis.as_mut() else {
+            return failed();
+        };
+        let llt = faer::sparse::linalg::cholesky::LltRef::<'_, usize, f64>::new(
+            &an.symbolic,
+            &an.l_values,
+        );
         llt.solve_in_place_with_conj(
             Conj::No,
             MatMut::from_column_major_slice_mut(&mut self.rhs, an.dim, 1),

@@ -174,6 +174,22 @@ impl LinearSolver {
         }
     }
 
+    /// Solves with the factorization of the last matrix solved (modified Newton); `None`
+    /// when the solver keeps none (PCG) or has none for this structure. See
+    /// [`SparseCholesky::resolve`].
+    pub fn resolve(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+    ) -> Option<SolveReport> {
+        match self {
+            LinearSolver::Pcg(_) => None,
+            LinearSolver::Cholesky(c) => c.resolve(a, b, x, mask),
+        }
+    }
+
     /// A short name for tables.
     pub fn name(&self) -> &'static str {
         match self {
