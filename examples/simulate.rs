@@ -17,7 +17,8 @@
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
 //! `--no-guard`, `--obj`, `--out DIR`, `--quiet`, `--threads N` (threads for the force
-//! kernels of one body; default 0: all cores; results are the same bits for any N).
+//! kernels of one body; default 0: all cores; results are the same bits for any N),
+//! `--solver auto|pcg|cholesky` (the implicit methods' linear solver).
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -47,6 +48,7 @@ struct Args {
     out: Option<PathBuf>,
     quiet: bool,
     threads: usize,
+    solver: SolverChoice,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -67,6 +69,7 @@ fn parse_args() -> Result<Args, String> {
         out: None,
         quiet: false,
         threads: 0,
+        solver: SolverChoice::Auto,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -108,6 +111,14 @@ fn parse_args() -> Result<Args, String> {
             "--obj" => a.obj = true,
             "--out" => a.out = Some(val("--out")?.into()),
             "--quiet" => a.quiet = true,
+            "--solver" => {
+                a.solver = match val("--solver")?.as_str() {
+                    "auto" => SolverChoice::Auto,
+                    "pcg" => SolverChoice::Pcg,
+                    "cholesky" => SolverChoice::Cholesky,
+                    o => return Err(format!("--solver: unknown '{o}' (auto, pcg, cholesky)")),
+                }
+            }
             "--threads" => {
                 a.threads = val("--threads")?
                     .parse()
@@ -187,7 +198,7 @@ fn config(a: &Args) -> DriverConfig {
             atol: a.atol,
             ..Default::default()
         },
-        solver: Default::default(),
+        solver: a.solver,
         energy_guard: if a.guard { Some(100.0) } else { None },
     }
 }

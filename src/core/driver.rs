@@ -181,7 +181,7 @@ impl Default for DriverConfig {
 
 /// The divergence guard's energy check runs every this many substeps (and on each frame's
 /// last substep).
-pub const GUARD_EVERY: u32 = 16;
+pub const GUARD_EVERY: u32 = 64;
 
 /// A system, its state and a method, advanced frame by frame.
 pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
@@ -338,7 +338,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             // `GUARD_EVERY` substeps and on the frame's last, so every delivered state has
             // passed it (a blow-up between checks turns the state non-finite first, caught
             // above, or is caught at the next check; either way the frame is refused).
-            let check = t_new64 >= t_end || (rep.substeps + 1) % GUARD_EVERY == 0;
+            let check = t_new64 >= t_end || (rep.substeps + 1).is_multiple_of(GUARD_EVERY);
             if let Some(bound) = self.energy_bound.filter(|_| check) {
                 let k = self.system.guard_energy(&self.state);
                 if k.is_nan() || k > bound {

@@ -417,6 +417,53 @@ impl OdeSystem<ParticleState> for ParticleModel {
         }
     }
 
+    /// `derivative` then `kick_drift` fused: forces into `scratch.v`, then one sweep
+    /// `v ← v + h a`, `x ← x + h (v₀ + h a)`; pinned and prescribed particles (few) are redone
+    /// afterwards with the derivative's values for them, from positions saved in `scratch.x`.
+    fn symplectic_euler(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        state: &mut ParticleState,
+        scratch: &mut ParticleState,
+    ) -> bool {
+        let f = &mut scratch.v;
+        f.fill(Vector::ZERO);
+        self.accumulate_forces(t, state, f);
+        for p in self.pinned.iter().map(|p| p.0).chain(self.prescribed.iter().map(|p| p.0)) {
+            scratch.x[p as usize] = state.x[p as usize];
+        }
+        let g = self.gravity;
+        for (((x, v), f), &w) in state
+            .x
+            .iter_mut()
+            .zip(state.v.iter_mut())
+            .zip(scratch.v.iter())
+            .zip(&self.inv_mass)
+        {
+            // Pinned and prescribed particles have w = 0 and get no gravity.
+            let a = if w > 0.0 { *f * w + g } else { Vector::ZERO };
+            let dv = a * h;
+            let v0 = *v;
+            *v += dv;
+            *x += (v0 + dv) * h;
+        }
+        for &(p, _) in &self.pinned {
+            // The derivative of a pin is zero: x and v stay (v got + 0 above).
+            let p = p as usize;
+            let dv = Vector::ZERO * h;
+            state.x[p] = scratch.x[p] + (Vector::ZERO + dv) * h;
+        }
+        for (p, m) in &self.prescribed {
+            let p = *p as usize;
+            let (_, vp, ap) = m.eval(t);
+            let dv = ap * h;
+            state.v[p] += dv;
+            state.x[p] = scratch.x[p] + (vp + dv) * h;
+        }
+        true
+    }
+
     fn apply_constraints(&self, t: Scalar, state: &mut ParticleState) {
         for &(p, x) in &self.pinned {
             state.x[p as usize] = x;
