@@ -7,7 +7,7 @@
 //! the gradient (forces and the objective), and the linear solve. The state is advanced 30
 //! steps first, so the elements are deformed.
 //!
-//! `cargo bench --no-default-features --bench fem`. Target (issue 5): the armadillo at
+//! `cargo bench --no-default-features --bench fem`. Target: the armadillo at
 //! ≤ 8 ms per step with backward Euler on one core.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.

@@ -6,7 +6,7 @@
 //! step of the same ongoing simulation.
 //!
 //! `cargo bench --bench implicit` (add `--no-default-features` to skip building Bevy: the
-//! numbers are the core's either way). Target (issue 4): linearly implicit Euler on 128×128 at
+//! numbers are the core's either way). Target: linearly implicit Euler on 128×128 at
 //! ≤ 16.7 ms per step on one core.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.

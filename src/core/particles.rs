@@ -430,7 +430,12 @@ impl OdeSystem<ParticleState> for ParticleModel {
         let f = &mut scratch.v;
         f.fill(Vector::ZERO);
         self.accumulate_forces(t, state, f);
-        for p in self.pinned.iter().map(|p| p.0).chain(self.prescribed.iter().map(|p| p.0)) {
+        for p in self
+            .pinned
+            .iter()
+            .map(|p| p.0)
+            .chain(self.prescribed.iter().map(|p| p.0))
+        {
             scratch.x[p as usize] = state.x[p as usize];
         }
         let g = self.gravity;
