@@ -4,8 +4,8 @@
 //! Each spring `(a, b)` is stored once in the row of its lower index `i = min(a, b)`, with
 //! `j = max(a, b)`; rows are in particle order and a row's springs in order of `j`. One pass
 //! over the springs computes each force `f = c (x_i − x_j)` — the factor
-//! `c = k (L/l − 1) − b (n·v_r)/l` eight springs at a time with AVX where the processor has it,
-//! so square roots and divisions run eight wide — subtracts it from `f_j`, and sums the row's
+//! `c = k (L/l − 1) − b (n·v_r)/l` eight springs at a time with AVX where the processor has it
+//! (four in the f64 build), so square roots and divisions run in parallel lanes — subtracts it from `f_j`, and sums the row's
 //! forces on `i` in a register: the running sum is stored to a per-particle buffer after every
 //! spring (no branch at row ends; the last store of a row holds its total), and each row total
 //! is added to `f_i` once at the end. The one-loop reference kernel instead adds into `f[i]`
@@ -197,7 +197,7 @@ impl SpringRows {
             spill: SharedMut(spill.as_mut_ptr()),
             rowsum: SharedMut(rowsum.as_mut_ptr()),
         };
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        #[cfg(target_arch = "x86_64")]
         let avx = std::arch::is_x86_feature_detected!("avx");
         let job = |c: usize| {
             let ch = self.chunks[c];
@@ -210,7 +210,7 @@ impl SpringRows {
                     acc: Vector::ZERO,
                     slot: ch.spill as usize,
                 };
-                #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+                #[cfg(target_arch = "x86_64")]
                 if avx {
                     self.walk_avx(&mut st, ch.s1 as usize, x, v, out);
                 }
@@ -363,6 +363,89 @@ impl SpringRows {
                     self.apply(st, s + q, d[q] * c[q], out);
                 }
                 st.s += 8;
+            }
+        }
+    }
+}
+
+impl SpringRows {
+    /// Four springs at a time in AVX, in f64: the factors as [`Self::walk`] computes them,
+    /// lane by lane with the same operations (no fused multiply-add, so the same bits), then
+    /// [`Self::apply`] in order. Stops where fewer than four springs are left.
+    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+    #[target_feature(enable = "avx")]
+    unsafe fn walk_avx(
+        &self,
+        st: &mut Walk,
+        s1: usize,
+        x: &[Vector],
+        v: Option<&[Vector]>,
+        out: Out,
+    ) {
+        use std::arch::x86_64::*;
+        // SAFETY: `st.s + 3 < s1 ≤ cols.len()`; particle indices below the bound the caller
+        // guarantees.
+        unsafe {
+            let zero = _mm256_setzero_pd();
+            let one = _mm256_set1_pd(1.0);
+            let mut c = [0.0f64; 4];
+            while st.s + 4 <= s1 {
+                let s = st.s;
+                let cols = self.cols.as_ptr().add(s);
+                let ii = self.col_i.as_ptr().add(s);
+                let diff = |a: &[Vector], q: usize| -> Vector {
+                    *a.get_unchecked(*ii.add(q) as usize)
+                        - *a.get_unchecked((*cols.add(q)).j as usize)
+                };
+                let lanes = |a: [f64; 4]| _mm256_set_pd(a[3], a[2], a[1], a[0]);
+                let col = |f: fn(&Col) -> f64| lanes(std::array::from_fn(|q| f(&*cols.add(q))));
+                let d: [Vector; 4] = std::array::from_fn(|q| diff(x, q));
+                let (dx, dy, dz) = (
+                    lanes(d.map(|d| d.x)),
+                    lanes(d.map(|d| d.y)),
+                    lanes(d.map(|d| d.z)),
+                );
+                let (rest, k) = (col(|c| c.rest), col(|c| c.k));
+                let dd = _mm256_add_pd(
+                    _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
+                    _mm256_mul_pd(dz, dz),
+                );
+                let l = _mm256_sqrt_pd(dd);
+                let pos = _mm256_cmp_pd::<_CMP_GT_OQ>(l, zero);
+                let coef = match v {
+                    Some(v) => {
+                        let w: [Vector; 4] = std::array::from_fn(|q| diff(v, q));
+                        let (wx, wy, wz) = (
+                            lanes(w.map(|w| w.x)),
+                            lanes(w.map(|w| w.y)),
+                            lanes(w.map(|w| w.z)),
+                        );
+                        let damping = col(|c| c.damping);
+                        let inv = _mm256_and_pd(_mm256_div_pd(one, l), pos);
+                        let along = _mm256_mul_pd(
+                            _mm256_add_pd(
+                                _mm256_add_pd(_mm256_mul_pd(dx, wx), _mm256_mul_pd(dy, wy)),
+                                _mm256_mul_pd(dz, wz),
+                            ),
+                            inv,
+                        );
+                        let neg_k = _mm256_xor_pd(k, _mm256_set1_pd(-0.0));
+                        let mag = _mm256_sub_pd(
+                            _mm256_mul_pd(neg_k, _mm256_sub_pd(l, rest)),
+                            _mm256_mul_pd(damping, along),
+                        );
+                        _mm256_mul_pd(mag, inv)
+                    }
+                    None => {
+                        let r = _mm256_div_pd(rest, l);
+                        _mm256_and_pd(_mm256_mul_pd(k, _mm256_sub_pd(r, one)), pos)
+                    }
+                };
+                _mm256_storeu_pd(c.as_mut_ptr(), coef);
+                for q in 0..4 {
+                    self.apply(st, s + q, d[q] * c[q], out);
+                }
+                st.s += 4;
             }
         }
     }
