@@ -301,12 +301,12 @@ pub struct BackwardEuler {
     pub definite: bool,
     /// The linear solver of the Newton systems.
     pub solver: LinearSolver,
-    /// Modified Newton: with a direct solver, an iteration that follows a full Newton step
-    /// which cut the gradient at least fourfold reuses that step's matrix and factorization
-    /// (no assembly, no factorization: two triangular solves), and refactors as soon as
-    /// progress slows. Converges to the same tolerance, linearly instead of quadratically, at
-    /// a fraction of the cost per iteration when factoring dominates (finite elements). Off
-    /// by default; on for bodies that prefer the direct solver.
+    /// Modified Newton: with a direct solver, every iteration after the first first tries the
+    /// last matrix and its factorization (no assembly, no factorization: two triangular
+    /// solves), and refactors when that direction does not descend or when the previous reused
+    /// step failed to halve the gradient. Converges to the same tolerance, linearly instead of
+    /// quadratically, at a fraction of the cost per iteration when factoring dominates (finite
+    /// elements). Off by default; on for bodies that prefer the direct solver.
     pub reuse_factorization: bool,
     a: Option<SpringMatrix>,
     x0: Vec<Vector>,
@@ -477,8 +477,8 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             self.stats.newton_iterations += 1;
             let mut solve = Default::default();
             let mut slope = 0.0f64;
-            // Modified Newton: the last factorization, while full steps keep cutting the
-            // gradient at least fourfold.
+            // Modified Newton: the last factorization, unless a reused one has just failed to
+            // halve the gradient.
             let g = &rep.gradient_norms;
             let reused = self.reuse_factorization
                 && g.len() >= 2
