@@ -12,6 +12,7 @@ use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::integrate::IntegratorKind;
+use bevy_soft_body::core::particles::ParticleModel;
 use bevy_soft_body::ecs::*;
 use bevy_soft_body::math::to_f32;
 
@@ -101,16 +102,24 @@ fn a_tet_body_steps_exactly_as_the_core_driver() {
         assert_eq!(n_pinned, 9); // the x = 0 face of a 3×2×2-cell box: 3 × 3 vertices
         // The core run, from the same start (after the first frame).
         let mesh = block();
-        let (mut model, _) = mesh.to_scene("b", MAT).build().unwrap();
-        // `Tet` components keep their rest shape in f32 (Bevy's `Vec3`): the same rounding here.
-        model.tets = bevy_soft_body::core::fem::Tets::new();
+        let (lumped, _) = mesh.to_scene("b", MAT).build().unwrap();
+        // The plugin's components hold what Bevy holds, in f32: `Particle::mass`, the `Tet`
+        // rest shape (a `Vec3`) and `SoftBody::gravity`. The core model gets the same
+        // rounding, so that in the f64 build both start from the same numbers.
+        let mut model = ParticleModel::new(
+            lumped
+                .mass()
+                .iter()
+                .map(|m| *m as f32 as bevy_soft_body::math::Scalar)
+                .collect(),
+        );
         for t in &mesh.tets {
             let rest = t.map(|i| {
                 glam::DVec3::from_array(mesh.vertices[i as usize].map(|c| c as f32 as f64))
             });
             model.tets.push(t.map(|i| i as usize), rest, &MAT).unwrap();
         }
-        model.gravity = bevy_soft_body::math::vec3([0.0, -9.81, 0.0]);
+        model.gravity = bevy_soft_body::math::from_f32(Vec3::new(0.0, -9.81, 0.0));
         let bs = app.world().get::<BodySim>(e).unwrap();
         let sim0 = bs.simulation().unwrap();
         let state = sim0.state.clone();
