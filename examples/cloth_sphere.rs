@@ -48,7 +48,7 @@ fn main() {
             .expect("built-in scene is valid");
         common::stage_with(
             &mut commands,
-            OrbitCamera {
+            common::OrbitCamera {
                 target: Vec3::new(0.0, 0.45, 0.0),
                 yaw: 0.5,
                 pitch: 0.12,

@@ -1,4 +1,4 @@
-//! The seed-003 pyramid: four layers of particles joined by springs along every row, column
+//! The particle-system assignment's pyramid: four layers of particles joined by springs along every row, column
 //! and diagonal and to the layer below, dropped from 0.5 m onto a ground plane with
 //! restitution 0.8 and friction 0.3. Symplectic Euler at h = 0.0005 by default;
 //! `cargo run --release --example pyramid -- i 0.0167` drops it with linearly implicit Euler,

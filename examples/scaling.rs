@@ -1,4 +1,4 @@
-//! Cost against size: every method on 32×32, 64×64 and 128×128 cloths of the seed material,
+//! Cost against size: every method on 32×32, 64×64 and 128×128 cloths of the cloth assignment's material,
 //! each at its own largest stable step — symplectic Euler and RK4 at 0.9× the linear bound of
 //! the cloth's fastest mode (which the stability study matches within 5 %), the methods
 //! without an undamped bound (forward Euler, trapezoid, midpoint, implicit-damping trapezoid)

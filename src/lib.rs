@@ -36,6 +36,8 @@ pub mod core;
 pub mod ecs;
 pub mod math;
 #[cfg(feature = "plugin")]
+mod plugins;
+#[cfg(feature = "plugin")]
 pub mod render;
 #[cfg(feature = "egui")]
 pub mod ui;
@@ -59,19 +61,26 @@ pub mod prelude {
     pub use crate::math::{PRECISION, Scalar, Vector};
 
     #[cfg(feature = "plugin")]
-    pub use crate::assets::TetMeshAsset;
+    pub use crate::SoftBodyPlugins;
+    #[cfg(feature = "plugin")]
+    pub use crate::assets::{SoftBodyAssetPlugin, TetMeshAsset};
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{
         BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
         GlobalWind, LinearSolverChoice, Particle, ParticleOf, Pinned, ResetSoftBodies,
-        ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider, SoftBodyDiverged,
-        SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodySet, SoftBodyStatus,
-        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
+        ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics,
+        SoftBodyDiverged, SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodyStatus,
+        SoftBodySystems, SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
     };
     #[cfg(feature = "plugin")]
-    pub use crate::render::{SkinnedSurface, SoftBodyDebug, SoftBodySurface};
+    pub use crate::render::{
+        SkinnedSurface, SoftBodyDebug, SoftBodyDebugPlugin, SoftBodyDebugRender, SoftBodyGizmos,
+        SoftBodyRenderPlugin, SoftBodySurface,
+    };
     #[cfg(feature = "egui")]
-    pub use crate::ui::{OrbitCamera, SoftBodyUi, SoftBodyUiPlugin};
+    pub use crate::ui::{SoftBodyUi, SoftBodyUiPlugin};
 }
 
 pub use crate::core::integrate::IntegratorKind;
+#[cfg(feature = "plugin")]
+pub use crate::plugins::SoftBodyPlugins;

@@ -2,7 +2,7 @@
 //! model's Jacobians and Hessians, mesh readers and skinning.
 //!
 //! The element kernels compute in `f64` in both builds, so the derivative bounds (1e-6
-//! relative, the issue's) hold in the default `f32` build too. Central differences have
+//! relative) hold in the default `f32` build too. Central differences have
 //! truncation error `O(ε²)` and round-off `O(u/ε)`; `ε = 1e-5` relative puts both near 1e-10.
 
 // Small dense matrices read best with explicit indices.
@@ -807,7 +807,7 @@ fn skinning_reproduces_affine_motion_and_embeds_the_hires_bunny() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Physics: a cantilever against beam theory; the seed's stiff armadillo.
+// Physics: a cantilever against beam theory; CSC417 assignment 3's stiff armadillo.
 
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::integrate::IntegratorKind;
@@ -845,7 +845,7 @@ fn cantilever_tip_deflection_converges_to_euler_bernoulli() {
     assert!(*errors.last().unwrap() < 0.05, "{errors:?}");
 }
 
-/// The seed's claim: the small stiff armadillo (0.98 m tall, E = 1 MPa, ν = 0.45) at
+/// CSC417 assignment 3's claim: the small stiff armadillo (0.98 m tall, E = 1 MPa, ν = 0.45) at
 /// h = 1/60, hung by its top 5 % and yanked sideways (20 m/s per metre of height, like a hard
 /// mouse pull). Returns the frames run, whether the driver reported a divergence, and the
 /// largest total energy (kinetic, elastic and gravitational) seen.

@@ -5,6 +5,7 @@
 #![cfg(feature = "plugin")]
 #![allow(clippy::unnecessary_cast)]
 
+mod common;
 use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
@@ -20,7 +21,7 @@ const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
     let mut app = App::new();
-    app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+    app.add_plugins((MinimalPlugins, TransformPlugin, common::headless_plugins()))
         .insert_resource(Time::<Fixed>::from_seconds(FRAME))
         .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
     app.update();

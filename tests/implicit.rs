@@ -307,7 +307,7 @@ fn implicit_methods_refuse_systems_without_jacobians() {
 fn implicit_damping_trapezoid_is_stable_ten_times_past_the_damping_limit() {
     // A hanging chain of 10 particles (m = 10 g, Hooke k = 10 N/m, dampers b = 1 N·s/m, links
     // 0.1 m, no drag). Explicitly, damping alone limits h to about m/(2b) = 5 ms (stiffest
-    // damping mode 4b/m = 400 s⁻¹, forward Euler needs h·400 < 2); the seed's elastic limit is
+    // damping mode 4b/m = 400 s⁻¹, forward Euler needs h·400 < 2); the cloth assignment's elastic limit is
     // 2b/k = 0.2 s. At h = 0.05 — ten times the damping limit, a quarter of the elastic one —
     // forward Euler blows up and the implicit-damping trapezoid settles to the analytic static
     // equilibrium: link i carries 10 − i particles, total extension Σ (10−i) m g / k =

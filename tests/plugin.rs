@@ -6,6 +6,7 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+mod common;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::build;
@@ -23,7 +24,7 @@ const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
     let mut app = App::new();
-    app.add_plugins((MinimalPlugins, TransformPlugin, SoftBodyPlugin::default()))
+    app.add_plugins((MinimalPlugins, TransformPlugin, common::headless_plugins()))
         .insert_resource(Time::<Fixed>::from_seconds(FRAME))
         .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
     app.update(); // the first update has zero delta: no fixed step
@@ -451,9 +452,9 @@ fn mesh_vertices_are_the_particles_and_normals_are_unit() {
     app.update();
     let prev = app
         .world()
-        .get::<BodySim>(e)
+        .get::<bevy_soft_body::render::PreviousPositions>(e)
         .unwrap()
-        .previous_positions()
+        .positions()
         .to_vec();
     let xs = particles_of(&app, e);
     assert_eq!(prev.len(), xs.len());
@@ -632,6 +633,15 @@ fn a_diverging_body_stops_alone_with_a_message_and_no_nan() {
         },
     );
     let good = spawn(&mut app, &chain_scene(), SoftBody::default());
+    // The same news as an entity event, caught by an observer on the body itself.
+    #[derive(Resource, Default)]
+    struct Caught(Vec<(Entity, String)>);
+    app.init_resource::<Caught>();
+    app.world_mut().entity_mut(bad).observe(
+        |d: On<SoftBodyDiverged>, mut caught: ResMut<Caught>| {
+            caught.0.push((d.event_target(), d.message.clone()));
+        },
+    );
     let mut sent = vec![];
     for _ in 0..400 {
         app.update();
@@ -646,6 +656,10 @@ fn a_diverging_body_stops_alone_with_a_message_and_no_nan() {
     println!("{msg}");
     assert!(msg.contains("forward Euler"), "{msg}");
     assert_eq!(sent, vec![bad], "one SoftBodyDiverged, for that body");
+    let caught = &app.world().resource::<Caught>().0;
+    assert_eq!(caught.len(), 1, "the observer on the body saw it once");
+    assert_eq!(caught[0].0, bad);
+    assert!(caught[0].1.contains("forward Euler"), "{}", caught[0].1);
     assert!(particles_of(&app, bad).iter().all(|x| x.is_finite()));
     assert_eq!(status(&app, good).state, BodyState::Running);
     assert_eq!(frames(&app, good), 400);

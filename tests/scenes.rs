@@ -1,5 +1,5 @@
 //! Builders, the JSON layout format, the driver's frame bookkeeping and divergence detection,
-//! and the seed assignment's claims about the cloth.
+//! and the cloth assignment's claims about the cloth.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -362,7 +362,7 @@ fn run_cloth(
 
 #[test]
 fn seed_cloth_claims_euler_diverges_trapezoid_and_rk4_hold() {
-    // The seed assignment: "Cloth simulation will quickly blow up when using the Euler
+    // The cloth assignment: "Cloth simulation will quickly blow up when using the Euler
     // integrator. Trapezoidal integrator is okay with small-enough steps (h = 0.001), and RK4
     // allows you to take larger steps (h = 0.005)." On the default 16×16 cloth (1 m, 10 g per
     // particle, k = 100/50/20 N/m, dampers 0.05 N·s/m, drag 0.01 N·s/m) the stiffest mode has

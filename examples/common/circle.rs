@@ -1,4 +1,4 @@
-//! The seed's first system, `dx/dt = (−y, x, 0)` from (1, 0, 0): the exact solution is the unit
+//! The cloth assignment's first system, `dx/dt = (−y, x, 0)` from (1, 0, 0): the exact solution is the unit
 //! circle, so the drift of |x| from 1 shows each method's character at a glance (forward Euler
 //! spirals out, the trapezoid and RK4 hold it). A first-order system of one vector: it runs
 //! through the core's integrators directly, with no particles, springs or ECS machinery.
@@ -41,7 +41,7 @@ pub fn add(app: &mut App, kind: IntegratorKind, h: f64, origin: Vec3, scale: f32
         scale,
         h,
     })
-    .add_systems(FixedUpdate, step.after(SoftBodySet::Writeback))
+    .add_systems(FixedUpdate, step.after(SoftBodySystems::Writeback))
     .add_systems(Update, (keys, draw))
     .add_systems(EguiPrimaryContextPass, window);
 }

@@ -1,4 +1,4 @@
-//! What every windowed example shares: the App (window, `SoftBodyPlugin`, the
+//! What every windowed example shares: the App (window, `SoftBodyPlugins` with the
 //! `SoftBodyUiPlugin` panel and keys, 60 Hz fixed step), lights, an orbit camera, the
 //! `LETTER H` arguments of the classic sample solution, `--size N` for the cloth examples and
 //! `--screenshot FILE [--frames N]` (N frames of exactly 1/60 s, default 150, then a PNG,
@@ -8,6 +8,7 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll};
 use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 use bevy_soft_body::prelude::*;
@@ -114,7 +115,9 @@ pub fn app(title: &str, args: &Args) -> App {
         }),
         ..default()
     }))
-    .add_plugins((SoftBodyPlugin::default(), SoftBodyUiPlugin))
+    .add_plugins(SoftBodyPlugins::default())
+    .register_type::<OrbitCamera>()
+    .add_systems(Update, orbit)
     .insert_resource(Time::<Fixed>::from_hz(60.0))
     .insert_resource(ClearColor(Color::srgb(0.09, 0.10, 0.12)));
     if let Some(path) = &args.screenshot {
@@ -206,3 +209,71 @@ fn screenshot(
 }
 
 pub mod circle;
+
+/// A camera that orbits `target` (right-drag or arrows; wheel or Up/Down zoom).
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+#[require(Camera3d)]
+pub struct OrbitCamera {
+    /// The point looked at.
+    pub target: Vec3,
+    /// Angle about +Y (rad).
+    pub yaw: f32,
+    /// Angle above the horizon (rad).
+    pub pitch: f32,
+    /// Distance to the target (m).
+    pub distance: f32,
+}
+
+impl Default for OrbitCamera {
+    fn default() -> Self {
+        Self {
+            target: Vec3::ZERO,
+            yaw: 0.0,
+            pitch: 0.2,
+            distance: 3.0,
+        }
+    }
+}
+
+fn orbit(
+    input: Res<ButtonInput<KeyCode>>,
+    buttons: Res<ButtonInput<MouseButton>>,
+    motion: Res<AccumulatedMouseMotion>,
+    scroll: Res<AccumulatedMouseScroll>,
+    time: Res<Time>,
+    mut contexts: bevy_egui::EguiContexts,
+    mut q: Query<(&mut OrbitCamera, &mut Transform)>,
+) {
+    let over_ui = bevy_soft_body::ui::egui_wants(&mut contexts, false);
+    let dt = time.delta_secs();
+    for (mut o, mut tf) in &mut q {
+        if input.pressed(KeyCode::ArrowLeft) {
+            o.yaw -= 1.5 * dt;
+        }
+        if input.pressed(KeyCode::ArrowRight) {
+            o.yaw += 1.5 * dt;
+        }
+        if input.pressed(KeyCode::ArrowUp) {
+            o.distance *= 1.0 - 1.2 * dt;
+        }
+        if input.pressed(KeyCode::ArrowDown) {
+            o.distance *= 1.0 + 1.2 * dt;
+        }
+        if !over_ui {
+            if buttons.pressed(MouseButton::Right) {
+                o.yaw -= motion.delta.x * 0.005;
+                o.pitch = (o.pitch + motion.delta.y * 0.005).clamp(-1.4, 1.4);
+            }
+            o.distance *= (1.0 - 0.1 * scroll.delta.y).clamp(0.5, 1.5);
+        }
+        o.distance = o.distance.clamp(0.2, 100.0);
+        let dir = Vec3::new(
+            o.yaw.sin() * o.pitch.cos(),
+            o.pitch.sin(),
+            o.yaw.cos() * o.pitch.cos(),
+        );
+        *tf =
+            Transform::from_translation(o.target + dir * o.distance).looking_at(o.target, Vec3::Y);
+    }
+}

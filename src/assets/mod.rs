@@ -66,9 +66,18 @@ impl AssetLoader for TetMeshLoader {
     }
 }
 
-pub(crate) fn build(app: &mut App) {
-    if app.world().contains_resource::<AssetServer>() {
-        app.init_asset::<TetMeshAsset>()
-            .init_asset_loader::<TetMeshLoader>();
+/// Loads tet meshes as [`TetMeshAsset`]s (part of [`SoftBodyPlugins`](crate::SoftBodyPlugins)).
+/// Needs Bevy's `AssetPlugin`; without it it does nothing.
+#[derive(Default, Debug, Clone, Copy)]
+pub struct SoftBodyAssetPlugin;
+
+impl Plugin for SoftBodyAssetPlugin {
+    fn build(&self, _app: &mut App) {}
+
+    fn finish(&self, app: &mut App) {
+        if app.world().contains_resource::<AssetServer>() {
+            app.init_asset::<TetMeshAsset>()
+                .init_asset_loader::<TetMeshLoader>();
+        }
     }
 }

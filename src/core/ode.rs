@@ -1,4 +1,4 @@
-//! The ODE abstraction of the seed design: "a time integrator does not know anything about
+//! The ODE abstraction of the PhysBAM slides' driver–layout design: "a time integrator does not know anything about
 //! the physics". An integrator advances any first-order system `dX/dt = f(X, t)` knowing only
 //! that states form a vector space ([`OdeState`]) and that the system can evaluate its
 //! derivative ([`OdeSystem`]).
@@ -366,7 +366,7 @@ impl<S: OdeState, F: Fn(Scalar, &S, &mut S) + Sync> OdeSystem<S> for FnSystem<F>
     }
 }
 
-/// The circle system of the seed assignment: one particle, first order,
+/// The circle system of the cloth assignment: one particle, first order,
 /// `f((x, y, z), t) = (-y, x, 0)`. Its exact solution rotates the initial point about the z
 /// axis with unit angular velocity, so the radius is conserved.
 #[derive(Clone, Copy, Debug, Default)]

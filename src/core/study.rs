@@ -8,7 +8,7 @@
 //! - a 4-particle spring pendulum (the default chain: 0.1 kg, 200 N/m, links 0.25 m, released
 //!   horizontally), undamped and with dampers of 0.5 N·s/m, to T = 1 s, against RK45 at
 //!   tolerance 1e-12 (cross-checked against tolerance 1e-11: their difference is reported);
-//! - a 16×16 cloth (the seed material), to T = 0.25 s, against RK4 at a step 16× smaller than
+//! - a 16×16 cloth (the cloth assignment's material), to T = 0.25 s, against RK4 at a step 16× smaller than
 //!   the smallest in the sweep (cross-checked against RK4 at twice that step).
 //!
 //! Error: the largest distance of a particle (or of the circle's point) from the reference at
@@ -32,7 +32,7 @@ pub enum Problem {
         /// With dampers of 0.5 N·s/m on every spring.
         damped: bool,
     },
-    /// A 16×16 cloth of the seed material.
+    /// A 16×16 cloth of the cloth assignment's material.
     Cloth,
 }
 
@@ -312,7 +312,7 @@ pub enum StabilityScene {
     /// An 8-particle spring chain (the default material, no dampers, drag 0.01), released
     /// horizontally.
     Chain,
-    /// The seed's 16×16 cloth (8×8 in quick mode), hanging from two corners, with dampers.
+    /// The cloth assignment's 16×16 cloth (8×8 in quick mode), hanging from two corners, with dampers.
     Cloth,
     /// The default 6×6×6 jelly block (4×4×4 in quick mode) in free fall, with dampers.
     Jelly,

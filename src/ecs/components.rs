@@ -10,7 +10,7 @@ use crate::core::integrate::IntegratorKind;
 pub use crate::core::integrate::SolverChoice;
 use crate::core::motion::Motion;
 use bevy::prelude::*;
-use bevy::reflect::impl_reflect_opaque;
+use bevy::reflect::{impl_reflect, impl_reflect_opaque};
 use parry3d::shape::SharedShape;
 
 impl_reflect_opaque!((in bevy_soft_body::core::integrate) IntegratorKind(
@@ -22,14 +22,22 @@ impl_reflect_opaque!((in bevy_soft_body::core::integrate) IntegratorKind(
     Serialize,
     Deserialize
 ));
-impl_reflect_opaque!((in bevy_soft_body::core::driver) StepPolicy(
-    Clone,
-    Debug,
-    Default,
-    PartialEq,
-    Serialize,
-    Deserialize
-));
+// Internally tagged in serde (`{"type": "fixed", "h": …}` in scene files), which RON cannot
+// read back: reflected field by field instead, so saved worlds round-trip.
+impl_reflect!(
+    #[reflect(Clone, Debug, Default, PartialEq)]
+    #[type_path = "bevy_soft_body::core::driver"]
+    enum StepPolicy {
+        Fixed {
+            h: f64,
+        },
+        Cfl {
+            number: f64,
+            max: f64,
+            limit: CflLimit,
+        },
+    }
+);
 impl_reflect_opaque!((in bevy_soft_body::core::driver) CflLimit(
     Clone,
     Debug,
@@ -64,7 +72,34 @@ impl_reflect_opaque!((in bevy_soft_body::core::integrate) SolverChoice(
     Serialize,
     Deserialize
 ));
-impl_reflect_opaque!((in bevy_soft_body::core::motion) Motion(Clone, Debug, PartialEq, Serialize, Deserialize));
+impl_reflect!(
+    #[reflect(Clone, Debug, PartialEq)]
+    #[type_path = "bevy_soft_body::core::motion"]
+    enum Motion {
+        Fixed {
+            position: [f64; 3],
+        },
+        Linear {
+            start: [f64; 3],
+            velocity: [f64; 3],
+            t0: f64,
+        },
+        Circle {
+            center: [f64; 3],
+            radius: f64,
+            omega: f64,
+            phase: f64,
+            a: [f64; 3],
+            b: [f64; 3],
+        },
+        Oscillate {
+            center: [f64; 3],
+            amplitude: [f64; 3],
+            omega: f64,
+            phase: f64,
+        },
+    }
+);
 
 /// The root of a soft body: how it is advanced. Particles join it with [`ParticleOf`] and
 /// springs with [`SpringOf`]. Editing this component (another integrator, step, drag...)
@@ -113,6 +148,10 @@ pub struct SoftBodyStatus {
     pub substeps: u32,
     /// Wall time of the last fixed step of this body (ms).
     pub step_ms: f32,
+    /// Linear-solver (conjugate-gradient) iterations in the last fixed step.
+    pub linear_iterations: u32,
+    /// Newton iterations in the last fixed step (backward Euler).
+    pub newton_iterations: u32,
     /// Particles and springs in the packed model.
     pub particles: u32,
     /// Springs in the packed model.
@@ -200,8 +239,10 @@ impl BodyParticles {
 #[reflect(Component, Debug)]
 pub struct Spring {
     /// First particle.
+    #[entities]
     pub a: Entity,
     /// Second particle.
+    #[entities]
     pub b: Entity,
     /// Rest length (m).
     pub rest_length: f32,
@@ -222,6 +263,7 @@ pub struct Spring {
 #[reflect(Component, Debug)]
 pub struct Tet {
     /// The four particles.
+    #[entities]
     pub particles: [Entity; 4],
     /// Their rest positions (m).
     pub rest: [Vec3; 4],
@@ -287,6 +329,7 @@ impl BodySprings {
 #[reflect(Component, Default, Debug)]
 pub struct Pinned {
     /// The entity to follow (`None`: fixed where the particle is when pinned).
+    #[entities]
     pub target: Option<Entity>,
     /// Offset in the target's local frame.
     pub offset: Vec3,
@@ -475,9 +518,18 @@ impl SoftBodyClock {
 /// The particles' states when the body was spawned, for [`ResetSoftBodies`].
 #[derive(Component, Reflect, Clone, Debug, Default, PartialEq)]
 #[reflect(Component, Default, Debug)]
+#[component(map_entities)]
 pub struct SoftBodyInitial {
     /// Particle entity, position and velocity at spawn.
     pub particles: Vec<(Entity, Vec3, Vec3)>,
+}
+
+impl bevy::ecs::entity::MapEntities for SoftBodyInitial {
+    fn map_entities<M: bevy::ecs::entity::EntityMapper>(&mut self, mapper: &mut M) {
+        for (e, _, _) in &mut self.particles {
+            *e = mapper.get_mapped(*e);
+        }
+    }
 }
 
 /// Send to put every body with a [`SoftBodyInitial`] back to it and the clock back to zero.
@@ -485,9 +537,12 @@ pub struct SoftBodyInitial {
 pub struct ResetSoftBodies;
 
 /// Sent when a body diverges: it stops, keeps its last good state, and the others go on.
-#[derive(Message, Clone, Debug)]
+/// Both a message (read with `MessageReader`) and an entity event triggered on the body
+/// (caught by an observer on it: `commands.entity(body).observe(|d: On<SoftBodyDiverged>| …)`).
+#[derive(Message, EntityEvent, Clone, Debug)]
 pub struct SoftBodyDiverged {
     /// The body's root entity.
+    #[event_target]
     pub body: Entity,
     /// What happened (frame, time, method, cause).
     pub divergence: Divergence,
@@ -495,10 +550,12 @@ pub struct SoftBodyDiverged {
     pub message: String,
 }
 
-/// Sent when a body is left out of stepping because of invalid input.
-#[derive(Message, Clone, Debug)]
+/// Sent when a body is left out of stepping because of invalid input. Both a message and an
+/// entity event triggered on the body, as [`SoftBodyDiverged`].
+#[derive(Message, EntityEvent, Clone, Debug)]
 pub struct SoftBodyInvalid {
     /// The body's root entity.
+    #[event_target]
     pub body: Entity,
     /// What is wrong, naming the entity.
     pub message: String,

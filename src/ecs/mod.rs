@@ -4,9 +4,13 @@
 //! core's scene builders or JSON files.
 
 mod components;
+mod diagnostics;
 pub(crate) mod plugin;
 mod spawn;
 
 pub use components::*;
-pub use plugin::{BodySim, SoftBodyKernelPool, SoftBodyPlugin, SoftBodySet};
+pub use diagnostics::SoftBodyDiagnostics;
+#[allow(deprecated)]
+pub use plugin::SoftBodySet;
+pub use plugin::{BodySim, SoftBodyKernelPool, SoftBodyPlugin, SoftBodySchedule, SoftBodySystems};
 pub use spawn::{DisplayMesh, SpawnSoftBody};

@@ -15,7 +15,7 @@ use bevy::prelude::*;
 use std::collections::HashMap;
 
 /// Soft-body physics. Runs in `FixedUpdate` by default ([`SoftBodyPlugin::new`] picks another
-/// schedule), in the chained sets [`SoftBodySet`]; meshes and debug drawing follow in
+/// schedule), in the chained sets [`SoftBodySystems`]; meshes and debug drawing follow in
 /// `PostUpdate`, once per frame.
 #[derive(Debug, Clone)]
 pub struct SoftBodyPlugin {
@@ -122,18 +122,42 @@ impl std::fmt::Debug for SoftBodyKernelPool {
     }
 }
 
-/// The phases of a soft-body step, chained in this order; order your systems against them.
+/// The schedule [`SoftBodyPlugin`] steps in (a resource, for plugins that add systems beside
+/// its sets).
+#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SoftBodySchedule(pub InternedScheduleLabel);
+
+/// The phases of a soft-body step, chained in this order in the plugin's schedule
+/// (`FixedUpdate` by default); order your systems against them, as with avian's
+/// `PhysicsSystems`.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum SoftBodySet {
+pub enum SoftBodySystems {
+    /// Before anything the plugin does in the frame (empty: for the app's own systems, e.g.
+    /// moving pin targets or colliders that the step should see this frame).
+    First,
     /// Topology and parameter changes → packed core model (rebuilt only when something
     /// changed); teleports, pin targets and collider poses applied.
     Prepare,
     /// Every body advanced by one fixed frame in substeps (forces, integration, collisions),
-    /// bodies in parallel.
+    /// bodies in parallel. Forces, integration and collision run inside this one set rather
+    /// than as systems of their own: a multi-stage method (RK4, the implicit methods' Newton
+    /// iterations) evaluates the forces several times per substep, and a frame has many
+    /// substeps.
     Step,
-    /// Core state → [`Particle`] components (and their `Transform`s), messages sent.
+    /// Core state → [`Particle`] components (and their `Transform`s), messages, events and
+    /// diagnostics sent.
     Writeback,
+    /// After everything the plugin does in the frame (empty: for the app's own systems that
+    /// read this frame's result).
+    Last,
 }
+
+/// The former name of [`SoftBodySystems`].
+#[deprecated(
+    since = "0.1.0",
+    note = "renamed `SoftBodySystems`, as avian's `PhysicsSystems`"
+)]
+pub type SoftBodySet = SoftBodySystems;
 
 impl Plugin for SoftBodyPlugin {
     fn build(&self, app: &mut App) {
@@ -161,18 +185,18 @@ impl Plugin for SoftBodyPlugin {
             .init_resource::<SoftBodyClock>()
             .insert_resource(SoftBodyKernelPool::new(self.kernel_threads))
             .add_message::<ResetSoftBodies>()
-            .register_type::<crate::render::SoftBodySurface>()
-            .register_type::<crate::render::SoftBodyDebug>()
             .init_resource::<GlobalWind>()
-            .init_resource::<crate::render::SoftBodyDebug>()
+            .insert_resource(SoftBodySchedule(self.schedule))
             .add_message::<SoftBodyDiverged>()
             .add_message::<SoftBodyInvalid>()
             .configure_sets(
                 self.schedule,
                 (
-                    SoftBodySet::Prepare,
-                    SoftBodySet::Step,
-                    SoftBodySet::Writeback,
+                    SoftBodySystems::First,
+                    SoftBodySystems::Prepare,
+                    SoftBodySystems::Step,
+                    SoftBodySystems::Writeback,
+                    SoftBodySystems::Last,
                 )
                     .chain(),
             )
@@ -181,17 +205,14 @@ impl Plugin for SoftBodyPlugin {
                 (
                     (reset, scripted_motion, prepare)
                         .chain()
-                        .in_set(SoftBodySet::Prepare),
-                    step.in_set(SoftBodySet::Step),
-                    (writeback, tick).chain().in_set(SoftBodySet::Writeback),
+                        .in_set(SoftBodySystems::Prepare),
+                    step.in_set(SoftBodySystems::Step),
+                    (writeback, super::diagnostics::measure, tick)
+                        .chain()
+                        .in_set(SoftBodySystems::Writeback),
                 ),
             );
-        crate::render::build(app);
-    }
-
-    fn finish(&self, app: &mut App) {
-        crate::render::finish(app);
-        crate::assets::build(app);
+        super::diagnostics::register(app);
     }
 }
 
@@ -213,8 +234,6 @@ pub struct BodySim {
     follow: Vec<(u32, Entity, Vec3, Vec3)>,
     /// Pinned-in-place particle indices (editing their position moves the pin).
     fixed_pins: Vec<u32>,
-    /// Positions before the last fixed step (kept only while interpolated drawing is on).
-    prev_x: Vec<Vec3>,
     problem: Option<String>,
     diverged: Option<Divergence>,
     report: bool,
@@ -227,6 +246,11 @@ impl BodySim {
         self.sim.as_ref()
     }
 
+    /// Stopped by a divergence (kept at its last good state until rebuilt or reset).
+    pub fn is_diverged(&self) -> bool {
+        self.diverged.is_some()
+    }
+
     /// The particle entity of each packed index.
     pub fn particle_entities(&self) -> &[Entity] {
         &self.particles
@@ -235,11 +259,6 @@ impl BodySim {
     /// The packed index of a particle entity of this body.
     pub fn index_of(&self, particle: Entity) -> Option<usize> {
         self.index.get(&particle).map(|i| *i as usize)
-    }
-
-    /// Positions before the last fixed step (empty unless interpolated drawing is on).
-    pub fn previous_positions(&self) -> &[Vec3] {
-        &self.prev_x
     }
 }
 
@@ -582,7 +601,7 @@ fn prepare(
     mut removed_pins: RemovedComponents<Pinned>,
     mut removed_forces: RemovedComponents<ExternalForce>,
     mut removed_winds: RemovedComponents<SoftBodyWind>,
-    mut invalid: MessageWriter<SoftBodyInvalid>,
+    (mut invalid, mut commands): (MessageWriter<SoftBodyInvalid>, Commands),
 ) {
     let frame_dt = fixed.timestep().as_secs_f64();
     // Removals cannot be traced to their body once despawned: every body re-checks.
@@ -700,10 +719,12 @@ fn prepare(
                 }
                 Err(msg) => {
                     warn!("{msg}; the body is left out of stepping");
-                    invalid.write(SoftBodyInvalid {
+                    let event = SoftBodyInvalid {
                         body: body_e,
                         message: msg.clone(),
-                    });
+                    };
+                    commands.trigger(event.clone());
+                    invalid.write(event);
                     bs.sim = None;
                     bs.particles = plist.to_vec();
                     bs.problem = Some(msg.clone());
@@ -740,12 +761,13 @@ fn prepare(
 fn step(
     clock: Res<SoftBodyClock>,
     pool: Res<SoftBodyKernelPool>,
-    debug: Res<crate::render::SoftBodyDebug>,
+    mut timing: ResMut<super::diagnostics::StepTiming>,
     mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
 ) {
     if !clock.running() {
         return;
     }
+    let start = bevy::platform::time::Instant::now();
     bodies
         .par_iter_mut()
         .for_each(|(body, mut bs, mut status)| {
@@ -758,12 +780,19 @@ fn step(
                 status.state = BodyState::Paused;
                 return;
             }
-            bs.prev_x.clear();
-            if debug.interpolate {
-                bs.prev_x.extend(sim.state.x.iter().map(|x| to_f32(*x)));
-            }
-            let start = std::time::Instant::now();
-            match pool.advance(sim) {
+            let start = bevy::platform::time::Instant::now();
+            let before = sim.stats();
+            let result = pool.advance(sim);
+            let after = sim.stats();
+            status.linear_iterations = after
+                .linear_iterations
+                .saturating_sub(before.linear_iterations)
+                as u32;
+            status.newton_iterations = after
+                .newton_iterations
+                .saturating_sub(before.newton_iterations)
+                as u32;
+            match result {
                 Ok(rep) => {
                     // Followers end the frame exactly on their target (the linear path's end,
                     // recomputed in floating point, can be off by an ulp).
@@ -782,6 +811,7 @@ fn step(
             status.time = sim.time as f32;
             status.step_ms = start.elapsed().as_secs_f32() * 1e3;
         });
+    timing.ms = Some(start.elapsed().as_secs_f64() * 1e3);
 }
 
 fn writeback(
@@ -789,6 +819,7 @@ fn writeback(
     mut particles: Query<(&mut Particle, Option<&mut Transform>)>,
     mut colliders: Query<(&GlobalTransform, &mut ColliderTrack)>,
     mut diverged: MessageWriter<SoftBodyDiverged>,
+    mut commands: Commands,
 ) {
     for (body_e, mut bs) in &mut bodies {
         let bs = &mut *bs;
@@ -798,11 +829,13 @@ fn writeback(
             bs.report = false;
             let message = format!("soft body {body_e}: {d}");
             warn!("{message}");
-            diverged.write(SoftBodyDiverged {
+            let event = SoftBodyDiverged {
                 body: body_e,
                 divergence: d.clone(),
                 message,
-            });
+            };
+            commands.trigger(event.clone());
+            diverged.write(event);
         }
         let Some(sim) = bs.sim.as_ref() else { continue };
         // The driver restores the last good state on divergence; never write anything else.

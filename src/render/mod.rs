@@ -8,8 +8,12 @@ use crate::core::ode::OdeState;
 use crate::ecs::plugin::BodySim;
 use crate::math::to_f32;
 use bevy::asset::RenderAssetUsages;
+use bevy::ecs::schedule::ScheduleLabel;
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
 use bevy::prelude::*;
+
+mod debug;
+pub use debug::{SoftBodyDebugPlugin, SoftBodyDebugRender, SoftBodyGizmos};
 
 /// Triangles over a body's particles (indices into its particle list, counter-clockwise), with
 /// optional per-particle texture coordinates: the body is drawn as a deforming mesh.
@@ -34,14 +38,10 @@ impl Default for SoftBodySurface {
     }
 }
 
-/// Debug drawing.
+/// Rendering settings shared by every body (a resource).
 #[derive(Resource, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Resource, Default, Debug)]
 pub struct SoftBodyDebug {
-    /// Draw every body's springs as lines, surfaces included.
-    pub wireframe: bool,
-    /// Radius of the particle spheres drawn for bodies without a surface (m).
-    pub particle_radius: f32,
     /// Give colliders without a mesh one of their shape (balls, ground planes, cuboids,
     /// capsules), when the app renders.
     pub show_colliders: bool,
@@ -54,16 +54,26 @@ pub struct SoftBodyDebug {
 impl Default for SoftBodyDebug {
     fn default() -> Self {
         Self {
-            wireframe: false,
-            particle_radius: 0.02,
             show_colliders: true,
             interpolate: false,
         }
     }
 }
 
+/// Deforming meshes for bodies with a [`SoftBodySurface`] or a [`SkinnedSurface`], and meshes
+/// for colliders that have none (part of [`SoftBodyPlugins`](crate::SoftBodyPlugins)). Needs
+/// an app that renders (`Assets<Mesh>`); without one it does nothing.
+#[derive(Default, Debug, Clone, Copy)]
+pub struct SoftBodyRenderPlugin;
+
+impl Plugin for SoftBodyRenderPlugin {
+    fn build(&self, app: &mut App) {
+        build(app);
+    }
+}
+
 /// A high-resolution display mesh embedded in a tet body's rest shape and carried by it
-/// (seed 004's skinning): every frame `x_display = W q` and smooth normals. With `show`, the
+/// (the skinning of CSC417 assignment 3): every frame `x_display = W q` and smooth normals. With `show`, the
 /// display mesh is drawn and the body's own surface hidden; without, the reverse.
 #[derive(Component, Reflect, Clone, Debug, Default)]
 #[reflect(Component, Default, Debug)]
@@ -88,8 +98,21 @@ pub struct SkinnedSurface {
 #[reflect(Component, Debug)]
 pub struct SkinnedDisplay(pub Entity);
 
-pub(crate) fn build(app: &mut App) {
+fn build(app: &mut App) {
+    let schedule = app
+        .world()
+        .get_resource::<crate::ecs::SoftBodySchedule>()
+        .map_or(FixedUpdate.intern(), |s| s.0);
+    app.add_systems(
+        schedule,
+        snapshot_previous
+            .after(crate::ecs::SoftBodySystems::Prepare)
+            .before(crate::ecs::SoftBodySystems::Step),
+    );
     app.register_type::<SkinnedSurface>()
+        .register_type::<SoftBodySurface>()
+        .register_type::<SoftBodyDebug>()
+        .init_resource::<SoftBodyDebug>()
         .register_type::<SkinnedDisplay>()
         .register_type::<SurfaceVertices>()
         .add_systems(PostUpdate, (sync_surfaces, collider_meshes, sync_skinned));
@@ -211,13 +234,6 @@ fn sync_skinned(
     }
 }
 
-/// Adds the gizmo drawing when the app has gizmos (call after `DefaultPlugins`).
-pub(crate) fn finish(app: &mut App) {
-    if app.world().contains_resource::<GizmoConfigStore>() {
-        app.add_systems(PostUpdate, draw_gizmos);
-    }
-}
-
 /// Area-weighted vertex normals of a triangle mesh, written into `normals` (one per vertex,
 /// unit length; `+Y` where no triangle with area touches a vertex).
 pub fn smooth_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], normals: &mut [[f32; 3]]) {
@@ -235,17 +251,66 @@ pub fn smooth_normals(positions: &[[f32; 3]], triangles: &[[u32; 3]], normals: &
     }
 }
 
+/// A body's particle positions before its last fixed step, kept by the render plugin while
+/// [`SoftBodyDebug::interpolate`] is on (the step itself keeps no render state).
+#[derive(Component, Clone, Debug, Default)]
+pub struct PreviousPositions(Vec<Vec3>);
+
+impl PreviousPositions {
+    /// The positions (empty until the first step with interpolation on).
+    pub fn positions(&self) -> &[Vec3] {
+        &self.0
+    }
+}
+
+/// Before each fixed step (after the model is prepared), keeps the positions the step starts
+/// from, for bodies that are about to step.
+fn snapshot_previous(
+    mut commands: Commands,
+    debug: Res<SoftBodyDebug>,
+    clock: Res<crate::ecs::SoftBodyClock>,
+    mut q: Query<(
+        Entity,
+        &crate::ecs::SoftBody,
+        &BodySim,
+        Option<&mut PreviousPositions>,
+    )>,
+) {
+    if !debug.interpolate || !clock.running() {
+        return;
+    }
+    for (e, body, bs, prev) in &mut q {
+        let Some(sim) = bs.simulation() else { continue };
+        if body.paused || bs.is_diverged() {
+            continue;
+        }
+        let x = sim.state.x.iter().map(|x| to_f32(*x));
+        match prev {
+            Some(mut p) => {
+                p.0.clear();
+                p.0.extend(x);
+            }
+            None => {
+                commands.entity(e).insert(PreviousPositions(x.collect()));
+            }
+        }
+    }
+}
+
 /// The positions to draw: the last fixed step's, or (interpolating) between the last two.
-fn drawn_positions(bs: &BodySim, alpha: Option<f32>) -> Vec<Vec3> {
+fn drawn_positions(
+    bs: &BodySim,
+    prev: Option<&PreviousPositions>,
+    alpha: Option<f32>,
+) -> Vec<Vec3> {
     let Some(sim) = bs.simulation() else {
         return vec![];
     };
     let cur = sim.state.x.iter().map(|x| to_f32(*x));
-    match alpha {
-        Some(a) if bs.previous_positions().len() == sim.state.x.len() => cur
-            .zip(bs.previous_positions())
-            .map(|(c, p)| p.lerp(c, a))
-            .collect(),
+    match (alpha, prev) {
+        (Some(a), Some(p)) if p.0.len() == sim.state.x.len() => {
+            cur.zip(&p.0).map(|(c, p)| p.lerp(c, a)).collect()
+        }
         _ => cur.collect(),
     }
 }
@@ -264,7 +329,7 @@ pub struct SurfaceVertices(pub Vec<Entity>);
 type SurfaceItem<'a> = (
     Entity,
     &'a SoftBodySurface,
-    &'a BodySim,
+    (&'a BodySim, Option<&'a PreviousPositions>),
     Option<&'a Mesh3d>,
     Option<&'a SurfaceVertices>,
     Has<MeshMaterial3d<StandardMaterial>>,
@@ -280,12 +345,12 @@ fn sync_surfaces(
 ) {
     let Some(mut meshes) = meshes else { return };
     let mut materials = materials;
-    for (e, surface, bs, mesh3d, vertices, has_material) in &q {
+    for (e, surface, (bs, prev), mesh3d, vertices, has_material) in &q {
         let Some(sim) = bs.simulation() else { continue };
         if !sim.state.is_finite() {
             continue;
         }
-        let drawn = drawn_positions(bs, alpha(&debug, &fixed));
+        let drawn = drawn_positions(bs, prev, alpha(&debug, &fixed));
         if let (Some(m), Some(vertices)) = (mesh3d, vertices) {
             let Some(mut mesh) = meshes.get_mut(&m.0) else {
                 continue;
@@ -347,36 +412,6 @@ fn sync_surfaces(
                 cull_mode: None,
                 ..default()
             })));
-        }
-    }
-}
-
-fn draw_gizmos(
-    debug: Res<SoftBodyDebug>,
-    fixed: Res<Time<Fixed>>,
-    mut gizmos: Gizmos,
-    q: Query<(&BodySim, Has<SoftBodySurface>)>,
-) {
-    for (bs, has_surface) in &q {
-        let Some(sim) = bs.simulation() else { continue };
-        if has_surface && !debug.wireframe {
-            continue;
-        }
-        if !sim.state.is_finite() {
-            continue;
-        }
-        let x = drawn_positions(bs, alpha(&debug, &fixed));
-        for s in sim.system.springs.as_slice() {
-            gizmos.line(x[s.i as usize], x[s.j as usize], Color::srgb(0.9, 0.9, 0.5));
-        }
-        if !has_surface {
-            for p in &x {
-                gizmos.sphere(
-                    Isometry3d::from_translation(*p),
-                    debug.particle_radius,
-                    Color::srgb(0.3, 0.7, 1.0),
-                );
-            }
         }
     }
 }

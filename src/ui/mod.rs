@@ -1,6 +1,7 @@
 //! The interactive face (feature `egui`): [`SoftBodyUiPlugin`] adds an egui panel to tune and
-//! inspect bodies live, the keys every example shares, grabbing particles with the mouse and
-//! an orbit camera.
+//! inspect bodies live, the keys every example shares (switchable: [`SoftBodyUi::keys`]) and
+//! grabbing particles with the mouse ([`SoftBodyUi::grab_button`]). Cameras are the app's own
+//! (the examples bring an orbit camera).
 //!
 //! Panel: body, integrator (every kind), step `h` (log slider), stiffness, damping and drag
 //! applied live, wind on/off, pause / step / reset, a live plot of kinetic, potential and
@@ -10,22 +11,20 @@
 //! Keys: Space pause/resume, N single step while paused, R reset, W wind on/off, G wireframe,
 //! E/S/T/M/K/A/I/D/B integrator (forward Euler, symplectic Euler, trapezoid, midpoint, RK4,
 //! RK45, linearly implicit Euler, implicit-damping trapezoid, backward Euler). Mouse: left
-//! button drags the particle nearest the cursor ray with a spring; right button drags or
-//! arrows orbit, wheel or Up/Down zoom.
+//! button (by default) drags the particle nearest the cursor ray with a spring.
 
 use crate::core::driver::StepPolicy;
 use crate::core::integrate::IntegratorKind;
 use crate::core::ode::OdeSystem;
 use crate::ecs::*;
 use crate::math::to_f32;
-use crate::render::SoftBodyDebug;
-use bevy::input::mouse::{AccumulatedMouseMotion, AccumulatedMouseScroll};
+use crate::render::{SoftBodyDebug, SoftBodyGizmos};
 use bevy::prelude::*;
 use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 use egui_plot::{Legend, Line, Plot, PlotPoints};
 use std::collections::{HashMap, VecDeque};
 
-/// The egui panel, shared keys, mouse grabbing and the orbit camera (see the module docs).
+/// The egui panel, shared keys and mouse grabbing (see the module docs).
 /// Add after `DefaultPlugins` and [`SoftBodyPlugin`].
 #[derive(Default)]
 pub struct SoftBodyUiPlugin;
@@ -35,37 +34,10 @@ impl Plugin for SoftBodyUiPlugin {
         if !app.is_plugin_added::<EguiPlugin>() {
             app.add_plugins(EguiPlugin::default());
         }
-        app.register_type::<OrbitCamera>()
-            .register_type::<SoftBodyUi>()
+        app.register_type::<SoftBodyUi>()
             .init_resource::<SoftBodyUi>()
-            .add_systems(Update, (keys, grab, orbit, record_energy, highlight))
+            .add_systems(Update, (keys, grab, record_energy, highlight))
             .add_systems(EguiPrimaryContextPass, panel);
-    }
-}
-
-/// A camera that orbits `target` (right-drag or arrows; wheel or Up/Down zoom).
-#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
-#[reflect(Component, Default, Debug)]
-#[require(Camera3d)]
-pub struct OrbitCamera {
-    /// The point looked at.
-    pub target: Vec3,
-    /// Angle about +Y (rad).
-    pub yaw: f32,
-    /// Angle above the horizon (rad).
-    pub pitch: f32,
-    /// Distance to the target (m).
-    pub distance: f32,
-}
-
-impl Default for OrbitCamera {
-    fn default() -> Self {
-        Self {
-            target: Vec3::ZERO,
-            yaw: 0.0,
-            pitch: 0.2,
-            distance: 3.0,
-        }
     }
 }
 
@@ -96,6 +68,11 @@ pub struct SoftBodyUi {
     pub damping_scale: f32,
     /// Stiffness of the mouse spring relative to the body's stiffest spring.
     pub grab_stiffness: f32,
+    /// The mouse button that grabs particles.
+    pub grab_button: MouseButton,
+    /// The shared keys (pause, step, reset, wind, wireframe, integrator letters) on; off
+    /// leaves the keyboard to the app.
+    pub keys: bool,
     #[reflect(ignore)]
     history: VecDeque<[f64; 4]>,
     #[reflect(ignore)]
@@ -113,6 +90,8 @@ impl Default for SoftBodyUi {
             stiffness_scale: 1.0,
             damping_scale: 1.0,
             grab_stiffness: 0.5,
+            grab_button: MouseButton::Left,
+            keys: true,
             history: VecDeque::new(),
             base: HashMap::new(),
             grab: None,
@@ -132,7 +111,9 @@ const LETTERS: [(KeyCode, IntegratorKind); 9] = [
     (KeyCode::KeyB, IntegratorKind::BackwardEuler),
 ];
 
-fn egui_wants(contexts: &mut EguiContexts, keyboard: bool) -> bool {
+/// Whether egui is using the keyboard (`keyboard`) or the pointer: an app's own controls
+/// (a camera) should then leave the input alone.
+pub fn egui_wants(contexts: &mut EguiContexts, keyboard: bool) -> bool {
     contexts.ctx_mut().is_ok_and(|c| {
         if keyboard {
             c.egui_wants_keyboard_input()
@@ -147,7 +128,7 @@ fn keys(
     input: Res<ButtonInput<KeyCode>>,
     mut contexts: EguiContexts,
     mut clock: ResMut<SoftBodyClock>,
-    mut debug: ResMut<SoftBodyDebug>,
+    mut gizmo_store: Option<ResMut<GizmoConfigStore>>,
     mut reset: MessageWriter<ResetSoftBodies>,
     mut bodies: Query<(Entity, &mut SoftBody, Option<&mut SoftBodyWind>)>,
     mut global_wind: ResMut<GlobalWind>,
@@ -155,6 +136,9 @@ fn keys(
     mut skins: Query<&mut crate::render::SkinnedSurface>,
     tet_bodies: Query<(), With<BodyTets>>,
 ) {
+    if !ui.keys {
+        return;
+    }
     // Elastic-body scenes: S toggles the skinned display mesh, N (while running) toggles
     // linearly implicit ↔ backward Euler.
     let fem = !tet_bodies.is_empty();
@@ -185,8 +169,11 @@ fn keys(
         reset.write(ResetSoftBodies);
         ui.history.clear();
     }
-    if input.just_pressed(KeyCode::KeyG) {
-        debug.wireframe = !debug.wireframe;
+    if input.just_pressed(KeyCode::KeyG)
+        && let Some(store) = gizmo_store.as_mut()
+    {
+        let (_, g) = store.config_mut::<SoftBodyGizmos>();
+        g.wireframe = !g.wireframe;
     }
     if input.just_pressed(KeyCode::KeyW) {
         let mut any = false;
@@ -282,7 +269,7 @@ fn panel(
     mut contexts: EguiContexts,
     mut ui_state: ResMut<SoftBodyUi>,
     mut clock: ResMut<SoftBodyClock>,
-    mut debug: ResMut<SoftBodyDebug>,
+    (mut debug, mut gizmo_store): (ResMut<SoftBodyDebug>, Option<ResMut<GizmoConfigStore>>),
     mut global_wind: ResMut<GlobalWind>,
     mut reset: MessageWriter<ResetSoftBodies>,
     mut bodies: Query<PanelItem>,
@@ -314,7 +301,10 @@ fn panel(
                     reset.write(ResetSoftBodies);
                     ui_state.history.clear();
                 }
-                ui.checkbox(&mut debug.wireframe, "wireframe");
+                if let Some(store) = gizmo_store.as_mut() {
+                    let (_, g) = store.config_mut::<SoftBodyGizmos>();
+                    ui.checkbox(&mut g.wireframe, "wireframe");
+                }
                 ui.checkbox(&mut debug.interpolate, "interpolate");
             });
             ui.label(format!(
@@ -578,19 +568,20 @@ fn grab(
     mut contexts: EguiContexts,
     buttons: Res<ButtonInput<MouseButton>>,
     windows: Query<&Window>,
-    cameras: Query<(&Camera, &GlobalTransform), With<OrbitCamera>>,
+    cameras: Query<(&Camera, &GlobalTransform), With<Camera3d>>,
     bodies: Query<(Entity, &BodySim)>,
     mut anchors: Query<&mut Transform>,
     mut ui: ResMut<SoftBodyUi>,
 ) {
-    let Ok((camera, cam_tf)) = cameras.single() else {
+    // The first active 3D camera (the one the cursor is over, for the usual single view).
+    let Some((camera, cam_tf)) = cameras.iter().find(|(c, _)| c.is_active) else {
         return;
     };
     let ray = windows
         .iter()
         .find_map(|w| w.cursor_position())
         .and_then(|c| camera.viewport_to_world(cam_tf, c).ok());
-    if buttons.just_released(MouseButton::Left)
+    if buttons.just_released(ui.grab_button)
         && let Some(g) = ui.grab.take()
     {
         for e in [g.spring, g.handle, g.anchor] {
@@ -606,7 +597,7 @@ fn grab(
         }
         return;
     }
-    if !buttons.just_pressed(MouseButton::Left) || egui_wants(&mut contexts, false) {
+    if !buttons.just_pressed(ui.grab_button) || egui_wants(&mut contexts, false) {
         return;
     }
     // The particle nearest the ray, over every body.
@@ -674,46 +665,4 @@ fn grab(
         spring,
         depth,
     });
-}
-
-fn orbit(
-    input: Res<ButtonInput<KeyCode>>,
-    buttons: Res<ButtonInput<MouseButton>>,
-    motion: Res<AccumulatedMouseMotion>,
-    scroll: Res<AccumulatedMouseScroll>,
-    time: Res<Time>,
-    mut contexts: EguiContexts,
-    mut q: Query<(&mut OrbitCamera, &mut Transform)>,
-) {
-    let over_ui = egui_wants(&mut contexts, false);
-    let dt = time.delta_secs();
-    for (mut o, mut tf) in &mut q {
-        if input.pressed(KeyCode::ArrowLeft) {
-            o.yaw -= 1.5 * dt;
-        }
-        if input.pressed(KeyCode::ArrowRight) {
-            o.yaw += 1.5 * dt;
-        }
-        if input.pressed(KeyCode::ArrowUp) {
-            o.distance *= 1.0 - 1.2 * dt;
-        }
-        if input.pressed(KeyCode::ArrowDown) {
-            o.distance *= 1.0 + 1.2 * dt;
-        }
-        if !over_ui {
-            if buttons.pressed(MouseButton::Right) {
-                o.yaw -= motion.delta.x * 0.005;
-                o.pitch = (o.pitch + motion.delta.y * 0.005).clamp(-1.4, 1.4);
-            }
-            o.distance *= (1.0 - 0.1 * scroll.delta.y).clamp(0.5, 1.5);
-        }
-        o.distance = o.distance.clamp(0.2, 100.0);
-        let dir = Vec3::new(
-            o.yaw.sin() * o.pitch.cos(),
-            o.pitch.sin(),
-            o.yaw.cos() * o.pitch.cos(),
-        );
-        *tf =
-            Transform::from_translation(o.target + dir * o.distance).looking_at(o.target, Vec3::Y);
-    }
 }

@@ -1,4 +1,4 @@
-//! Scene generators: pendulum, chain, cloth, the PhysBAM wire, the seed-003 pyramid, a jelly
+//! Scene generators: pendulum, chain, cloth, the PhysBAM wire, the particle-system assignment's pyramid, a jelly
 //! block and the cloth-and-sphere scene. Each returns a [`Scene`] (layout as data), so what a
 //! generator makes can be saved, edited and loaded back.
 
@@ -73,7 +73,7 @@ pub fn circle_start() -> [f64; 3] {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct ChainParams {
-    /// Particles including the fixed one (4 in the seed assignment).
+    /// Particles including the fixed one (4 in the cloth assignment).
     pub particles: usize,
     /// Link length (m).
     pub link: f64,
@@ -218,7 +218,7 @@ pub struct ClothParams {
 }
 
 impl Default for ClothParams {
-    /// The 16×16 cloth of the seed's claims: 1 m square, 10 g per particle.
+    /// The 16×16 cloth of the cloth assignment's claims: 1 m square, 10 g per particle.
     fn default() -> Self {
         Self {
             rows: 16,
@@ -475,7 +475,7 @@ pub fn wire(n: usize, frame_time: f64, frames: u32) -> Result<Scene, BuildError>
     Ok(s)
 }
 
-/// The seed-003 pyramid: layer `k` (1 at the apex) holds `k×k` particles; springs join every
+/// The particle-system assignment's pyramid: layer `k` (1 at the apex) holds `k×k` particles; springs join every
 /// pair of particles on a common row, column or diagonal of a layer, and each particle to the
 /// four corners of the square below it in every lower layer. Dropped from `drop_height` onto
 /// a ground plane with restitution 0.8 and friction 0.3.

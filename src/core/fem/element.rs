@@ -1,4 +1,4 @@
-//! One linear tetrahedron (CSC417 a3, seed 004), in `f64` whatever the crate's precision.
+//! One linear tetrahedron (CSC417 assignment 3, *The finite element method for 3D elastic objects*), in `f64` whatever the crate's precision.
 //!
 //! Shape functions are the barycentric coordinates `φ_a(X)` of the rest tet; their gradients
 //! `g_a = ∇φ_a` are constant: with `D_m = [X₁−X₀, X₂−X₀, X₃−X₀]`, `g₁..g₃` are the rows of
@@ -6,7 +6,7 @@
 //! `F = Σ_a x_a g_aᵀ = D_s D_m⁻¹`. One quadrature point (the centroid) is exact for a constant
 //! integrand, so the element energy is `V ψ(F)` with `V = det(D_m)/6` the rest volume.
 //!
-//! The energy density is the seed's compressible neo-Hookean
+//! The energy density is CSC417's compressible neo-Hookean
 //!
 //! `ψ(F) = C (J^(-2/3) tr(FᵀF) − 3) + D (J − 1)²`, `J = det F`,
 //!
@@ -98,7 +98,7 @@ fn frob(a: &DMat3, b: &DMat3) -> f64 {
 /// Below this volume ratio the isochoric term is evaluated at `J = J_MIN` (its `J^(-2/3)`
 /// frozen): an element squashed flat or inverted — by a contact projection, a hard drag, an
 /// explicit step — keeps finite energy and forces, and the volumetric term `D (J − 1)²`
-/// pushes it back. Above it the energy is exactly the seed's.
+/// pushes it back. Above it the energy is exactly CSC417's.
 pub const J_MIN: f64 = 0.1;
 
 /// `J^(-2/3)` (as `1/∛J²`), frozen below [`J_MIN`].
@@ -128,7 +128,7 @@ fn cofactor_differential(f: &DMat3, df: &DMat3) -> DMat3 {
     )
 }
 
-/// The seed's neo-Hookean energy density constants: `C` (isochoric, Pa) and `D` (volumetric,
+/// CSC417's neo-Hookean energy density constants: `C` (isochoric, Pa) and `D` (volumetric,
 /// Pa).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NeoHookeanConstants {

@@ -1,4 +1,4 @@
-//! Volumetric finite elements: linear tetrahedra with the seed's neo-Hookean energy
+//! Volumetric finite elements: linear tetrahedra with CSC417's neo-Hookean energy
 //! ([`element`]), the material as users give it ([`NeoHookean`]), the packed tet list a model
 //! composes with its springs ([`Tets`]), tet meshes and their loaders ([`mesh`]) and skinned
 //! display meshes ([`skin`]).
@@ -16,7 +16,7 @@ use std::sync::OnceLock;
 
 /// A neo-Hookean material as engineers give it.
 ///
-/// Converted to the seed's energy `ψ = C (J^(-2/3) tr(FᵀF) − 3) + D (J − 1)²` by matching
+/// Converted to CSC417's energy `ψ = C (J^(-2/3) tr(FᵀF) − 3) + D (J − 1)²` by matching
 /// linear elasticity at rest: with the Lamé shear modulus `μ = E / (2 (1 + ν))` and bulk
 /// modulus `κ = E / (3 (1 − 2ν))`, `C = μ/2` and `D = κ/2` (the deviatoric part linearizes to
 /// `μ |ε_dev|²`, the volumetric part to `½ κ (tr ε)²`).

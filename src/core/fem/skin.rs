@@ -1,4 +1,4 @@
-//! Skinned display meshes (seed 004): a high-resolution triangle mesh embedded in a tet mesh
+//! Skinned display meshes (as in CSC417 assignment 3): a high-resolution triangle mesh embedded in a tet mesh
 //! follows it through the sparse skinning matrix `W`, `x_display = W q`.
 //!
 //! Each display vertex gets the barycentric coordinates of the tet that contains it at rest;

@@ -1,7 +1,7 @@
 //! Springs and spring dampers, packed for a tight force kernel.
 //!
 //! Two laws are offered per spring:
-//! - Hooke, `f_i = −k (|d| − L) d/|d|` with `d = x_i − x_j` and `k` in N/m (the seed
+//! - Hooke, `f_i = −k (|d| − L) d/|d|` with `d = x_i − x_j` and `k` in N/m (the cloth
 //!   assignment's law);
 //! - strain, `f_i = −k (l/L − 1) n` with `k` in N (Young's modulus times area, the PhysBAM
 //!   slides' law).

@@ -140,7 +140,7 @@ impl TetForces {
     }
 }
 
-/// The forces `f_a = −V P g_a` of one element, with the seed's `P` (see
+/// The forces `f_a = −V P g_a` of one element, with CSC417's `P` (see
 /// [`NeoHookeanConstants::stress`](crate::core::fem::element::NeoHookeanConstants::stress)).
 ///
 /// # Safety
