@@ -7,9 +7,9 @@
 //! - [`core`]: the numerics, without Bevy — the ODE abstraction ([`core::ode`]), the
 //!   integrators ([`core::integrate`]), the particle model and its forces, collisions, scene
 //!   layouts ([`core::scene`], [`core::build`]) and the headless driver ([`core::driver`]).
-//! - the Bevy face (feature `plugin`, on by default): [`ecs`] (components, `SoftBodyPlugin`,
-//!   spawning scenes), [`render`] (deforming meshes, gizmos) and, with feature `egui`, `ui`
-//!   (panel, keys, mouse grab, orbit camera).
+//! - the Bevy face (feature `plugin`, on by default): `ecs` (components, `SoftBodyPlugin`,
+//!   spawning scenes), `render` (deforming meshes, gizmos) and, with feature `egui`, `ui`
+//!   (panel, keys, mouse grab).
 //!
 //! Layout is not driver: what a scene contains is described apart from how it is advanced,
 //! so switching from RK4 to symplectic Euler is one [`IntegratorKind`] value.
@@ -28,6 +28,7 @@
 // `Scalar` is f32 or f64 by feature, so a cast to or from it is a no-op in one build and
 // needed in the other.
 #![allow(clippy::unnecessary_cast)]
+#![warn(missing_docs)]
 
 #[cfg(feature = "plugin")]
 pub mod assets;

@@ -19,8 +19,6 @@ pub trait SpawnSoftBody {
     /// Returns the root, or the scene's validation errors (every bad field, with its path).
     fn spawn_soft_body(&mut self, scene: &Scene, body: SoftBody) -> Result<Entity, SceneError>;
 
-    /// Reads a scene JSON file and spawns it (see [`SpawnSoftBody::spawn_soft_body`]). An
-    /// unreadable file or invalid JSON is an error naming the file (and the field or line).
     /// Spawns a tet mesh as one elastic body of `material` (particle masses `Σ ρV/4`), with its
     /// boundary as the drawn surface and, when `display` gives a triangle mesh (vertices at
     /// rest, triangles), a [`SkinnedSurface`](crate::render::SkinnedSurface) embedding it
@@ -38,6 +36,8 @@ pub trait SpawnSoftBody {
     /// [`build::ground`](crate::core::build::ground), a moving ball...).
     fn spawn_collider(&mut self, collider: &crate::core::collide::ColliderDesc) -> Entity;
 
+    /// Reads a scene JSON file and spawns it (see [`SpawnSoftBody::spawn_soft_body`]). An
+    /// unreadable file or invalid JSON is an error naming the file (and the field or line).
     fn spawn_soft_body_file(
         &mut self,
         path: impl AsRef<std::path::Path>,

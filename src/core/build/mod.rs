@@ -10,6 +10,9 @@ use crate::core::scene::{
 };
 use serde::{Deserialize, Serialize};
 
+mod surface;
+pub use surface::{SurfaceBody, SurfaceParams, SurfaceStiffness, surface_cloth};
+
 /// Standard gravity (m/s²), along −y.
 pub const G: f64 = 9.81;
 
