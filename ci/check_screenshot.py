@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
 """Checks a cloth_sphere screenshot: the cloth and the sphere must both be visible.
+With `--cape`, checks the gltf_cape screenshot (see `cape` below).
 With `--body`, checks a finite-element screenshot (fem_bunny, fem_armadillo) instead: the
 skinned display mesh's beige (sRGB 0.78, 0.72, 0.62), lit — red ≥ green ≥ blue, red 12–70
 above blue, red > 120 — must cover more than 3 % of the frame right of the panel (10.9 % in
@@ -91,7 +92,31 @@ def body(path):
     return 0
 
 
+def cape(path):
+    """gltf_cape: the cape's purple glTF material (sRGB 0.55, 0.12, 0.60), lit — red and blue
+    both well above green — must cover more than 3 % of the frame right of the panel, and the
+    cape must hang below its pole's crossbar: purple in the lower half of the frame too."""
+    w, h, bpp, rows = read_png(path)
+    hits = low = total = 0
+    for y, line in enumerate(rows):
+        for x in range(380, w):
+            r, g, b = line[x * bpp], line[x * bpp + 1], line[x * bpp + 2]
+            total += 1
+            if r > 90 and b > 90 and r - g > 40 and b - g > 40:
+                hits += 1
+                low += y > h // 2
+    share = 100 * hits / total
+    print(f"{path}: {w}x{h}, cape {share:.2f} % of the frame right of the panel, "
+          f"{100 * low / max(hits, 1):.0f} % of it in the lower half")
+    if share <= 3.0 or low < 0.1 * hits:
+        print("FAIL: the cape needs > 3 % of those pixels, a tenth of them in the lower half")
+        return 1
+    return 0
+
+
 if __name__ == "__main__":
     if sys.argv[1] == "--body":
         sys.exit(body(sys.argv[2]))
+    if sys.argv[1] == "--cape":
+        sys.exit(cape(sys.argv[2]))
     sys.exit(main(sys.argv[1]))

@@ -46,6 +46,7 @@ pub mod ui;
 /// The names most programs need.
 pub mod prelude {
     pub use crate::core::build;
+    pub use crate::core::build::{SurfaceParams, SurfaceStiffness};
     pub use crate::core::collide::{Collider, ColliderDesc, ContactMaterial, ShapeDesc};
     pub use crate::core::driver::{
         CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
@@ -64,14 +65,18 @@ pub mod prelude {
     #[cfg(feature = "plugin")]
     pub use crate::SoftBodyPlugins;
     #[cfg(feature = "plugin")]
-    pub use crate::assets::{SoftBodyAssetPlugin, TetMeshAsset};
+    pub use crate::assets::{
+        SoftBodyAssetPlugin, SoftBodySceneAsset, SoftBodySceneRoot, SoftBodySceneSpawned,
+        TetMeshAsset,
+    };
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{
         BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
-        GlobalWind, LinearSolverChoice, Particle, ParticleOf, Pinned, ResetSoftBodies,
-        ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics,
-        SoftBodyDiverged, SoftBodyInitial, SoftBodyInvalid, SoftBodyPlugin, SoftBodyStatus,
-        SoftBodySystems, SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
+        GlobalWind, LinearSolverChoice, MeshBody, MeshPins, Particle, ParticleOf, Pinned,
+        ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider,
+        SoftBodyDiagnostics, SoftBodyDiverged, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial,
+        SoftBodyInvalid, SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems,
+        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf, triangle_mesh,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{

@@ -66,7 +66,7 @@ impl PluginGroup for SoftBodyPlugins {
         let group = PluginGroupBuilder::start::<Self>()
             .add(SoftBodyPlugin::new(self.schedule))
             .add(SoftBodyRenderPlugin)
-            .add(SoftBodyAssetPlugin)
+            .add(SoftBodyAssetPlugin::default())
             .add(SoftBodyDebugPlugin);
         #[cfg(feature = "egui")]
         let group = group.add(crate::ui::SoftBodyUiPlugin);

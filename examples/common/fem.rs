@@ -1,11 +1,9 @@
-//! What the finite-element examples share: loading a tet mesh through the asset server,
-//! reading a display surface, spawning the elastic body once the mesh is loaded. Not an
-//! example itself.
+//! What the finite-element examples share: loading a tet mesh and a display mesh through the
+//! asset server, spawning the elastic body once both are loaded. Not an example itself.
 
 #![allow(dead_code)]
 
 use bevy::prelude::*;
-use bevy_soft_body::core::fem::skin::read_obj;
 use bevy_soft_body::prelude::*;
 
 /// What to spawn once the tet mesh asset is loaded.
@@ -21,7 +19,8 @@ pub struct FemSpec {
     pub scale: f64,
     /// Offset (m).
     pub offset: [f64; 3],
-    /// A high-resolution OBJ under `assets/` to skin onto it.
+    /// A high-resolution mesh under `assets/` (any format Bevy loads as a `Mesh`: `.obj`
+    /// through the crate's loader, a glTF primitive...) to skin onto it.
     pub display: Option<&'static str>,
     /// Pin the vertices whose height is above this fraction of the mesh's height.
     pub pin_above: Option<f64>,
@@ -42,6 +41,7 @@ pub fn spawn_when_loaded(
     mut particles: Query<&mut Particle>,
     mut pending: Local<Option<Entity>>,
     mut initial: Query<&mut SoftBodyInitial>,
+    (meshes, mut display_handle): (Res<Assets<Mesh>>, Local<Option<Handle<Mesh>>>),
 ) {
     // A frame after spawning: pin and kick through the spawned particle entities.
     if let Some(root) = *pending
@@ -84,14 +84,26 @@ pub fn spawn_when_loaded(
     let Some(asset) = assets.get(&spec.mesh) else {
         return;
     };
+    // The display mesh, as a Bevy mesh asset.
+    if let Some(name) = spec.display
+        && display_handle.is_none()
+    {
+        *display_handle = Some(server.load(name));
+    }
+    if let Some(h) = display_handle.as_ref() {
+        if let bevy::asset::LoadState::Failed(e) = server.load_state(h) {
+            error!("display mesh failed to load: {e}");
+            *display_handle = None;
+        } else if !meshes.contains(h) {
+            return;
+        }
+    }
     *done = true;
     let mesh = asset.0.clone().transformed(spec.scale, spec.offset);
-    let display = spec.display.and_then(|name| {
-        let path = format!("{}/assets/{name}", env!("CARGO_MANIFEST_DIR"));
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| error!("{path}: {e}"))
+    let display = display_handle.as_ref().and_then(|h| {
+        let (mut v, f) = triangle_mesh(meshes.get(h)?)
+            .map_err(|e| error!("display mesh: {e}"))
             .ok()?;
-        let (mut v, f) = read_obj(&path, &text).map_err(|e| error!("{e}")).ok()?;
         for p in &mut v {
             for (c, o) in p.iter_mut().zip(spec.offset) {
                 *c = *c * spec.scale as f32 + o as f32;

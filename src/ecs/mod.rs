@@ -5,11 +5,15 @@
 
 mod components;
 mod diagnostics;
+pub(crate) mod mesh_body;
 pub(crate) mod plugin;
 mod spawn;
 
 pub use components::*;
 pub use diagnostics::SoftBodyDiagnostics;
+pub use mesh_body::{
+    MeshBody, MeshPins, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyMeshSurface, triangle_mesh,
+};
 #[allow(deprecated)]
 pub use plugin::SoftBodySet;
 pub use plugin::{BodySim, SoftBodyKernelPool, SoftBodyPlugin, SoftBodySchedule, SoftBodySystems};

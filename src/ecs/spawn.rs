@@ -32,6 +32,19 @@ pub trait SpawnSoftBody {
         display: Option<DisplayMesh>,
     ) -> Result<Entity, SceneError>;
 
+    /// Spawns a triangle mesh of the game's own as a cloth body
+    /// ([`build::surface_cloth`](crate::core::build::surface_cloth): vertices split by UV seams
+    /// welded, stretch and bending springs, masses from areas), pinned as `params` says and
+    /// drawn with the mesh itself ([`SoftBodyMeshSurface`](super::SoftBodyMeshSurface): UVs,
+    /// colours and material kept). A mesh that is no triangle list, or that the builder
+    /// refuses, is an error saying why.
+    fn spawn_mesh_body(
+        &mut self,
+        mesh: &Mesh,
+        params: &super::MeshBody,
+        body: SoftBody,
+    ) -> Result<Entity, SceneError>;
+
     /// Spawns a collider described as in scenes (a ground plane from
     /// [`build::ground`](crate::core::build::ground), a moving ball...).
     fn spawn_collider(&mut self, collider: &crate::core::collide::ColliderDesc) -> Entity;
@@ -65,6 +78,15 @@ impl SpawnSoftBody for Commands<'_, '_> {
         spawn_collider(self, collider)
     }
 
+    fn spawn_mesh_body(
+        &mut self,
+        mesh: &Mesh,
+        params: &super::MeshBody,
+        body: SoftBody,
+    ) -> Result<Entity, SceneError> {
+        super::mesh_body::spawn_mesh_body(self, mesh, params, body)
+    }
+
     fn spawn_tet_body(
         &mut self,
         mesh: &crate::core::fem::mesh::TetMesh,
@@ -96,7 +118,7 @@ impl SpawnSoftBody for Commands<'_, '_> {
 pub type DisplayMesh<'a> = (&'a [[f32; 3]], &'a [[u32; 3]]);
 
 /// Spawns a scene; returns the root and the particle entities in scene order.
-fn spawn_scene(
+pub(crate) fn spawn_scene(
     commands: &mut Commands,
     scene: &Scene,
     mut body: SoftBody,

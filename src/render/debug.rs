@@ -1,6 +1,7 @@
 //! Debug drawing with Bevy gizmos, in a gizmo config group of its own ([`SoftBodyGizmos`]):
 //! springs as lines, particles as small spheres. Bodies without a surface (chains, wires, jelly
-//! lattices) are always drawn this way; with [`SoftBodyGizmos::wireframe`] every body is. A
+//! lattices) are always drawn this way; with [`SoftBodyGizmos::wireframe`] every body is
+//! (bodies with a [`SoftBodySurface`] or a mesh of the game's are drawn as meshes otherwise). A
 //! [`SoftBodyDebugRender`] on a body overrides the colours or hides it.
 
 use super::{PreviousPositions, SoftBodyDebug, SoftBodySurface, alpha, drawn_positions};
@@ -99,7 +100,7 @@ impl Plugin for SoftBodyDebugPlugin {
 
 type GizmoItem<'a> = (
     &'a BodySim,
-    Has<SoftBodySurface>,
+    (Has<SoftBodySurface>, Has<crate::ecs::SoftBodyMeshSurface>),
     Option<&'a SoftBodyDebugRender>,
     Option<&'a PreviousPositions>,
 );
@@ -112,7 +113,9 @@ fn draw_gizmos(
 ) {
     let group = *gizmos.config_ext;
     let a = debug.and_then(|d| alpha(&d, &fixed));
-    for (bs, has_surface, render, prev) in &q {
+    for (bs, (surface, mesh_surface), render, prev) in &q {
+        // Drawn as a mesh: its own surface, or a mesh of the game's.
+        let has_surface = surface || mesh_surface;
         let Some(sim) = bs.simulation() else { continue };
         let always = render.is_some_and(|r| r.always);
         if has_surface && !group.wireframe && !always {

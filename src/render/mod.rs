@@ -115,7 +115,16 @@ fn build(app: &mut App) {
         .init_resource::<SoftBodyDebug>()
         .register_type::<SkinnedDisplay>()
         .register_type::<SurfaceVertices>()
-        .add_systems(PostUpdate, (sync_surfaces, collider_meshes, sync_skinned));
+        .register_type::<crate::ecs::SoftBodyMeshSurface>()
+        .add_systems(
+            PostUpdate,
+            (
+                sync_surfaces,
+                sync_mesh_surfaces,
+                collider_meshes,
+                sync_skinned,
+            ),
+        );
 }
 
 type SkinnedItem<'a> = (
@@ -412,6 +421,118 @@ fn sync_surfaces(
                 cull_mode: None,
                 ..default()
             })));
+        }
+    }
+}
+
+/// Buffers reused every frame: particle positions, welded triangles, normals, vertex → particle.
+type MeshScratch = (Vec<[f32; 3]>, Vec<[u32; 3]>, Vec<[f32; 3]>, Vec<u32>);
+
+type MeshSurfaceItem<'a> = (
+    Entity,
+    &'a mut crate::ecs::SoftBodyMeshSurface,
+    (&'a BodySim, Option<&'a PreviousPositions>),
+    Option<&'a Mesh3d>,
+    Has<MeshMaterial3d<StandardMaterial>>,
+);
+
+/// Bodies drawn with a mesh of the game's own: the mesh asset is made on the first frame (a
+/// copy of the source, so the source asset stays as loaded); then every frame its vertices
+/// take their particles' positions, normals are recomputed per particle over the welded
+/// triangles and shared by every copy of a seam vertex, and tangents are regenerated when the
+/// mesh has them.
+fn sync_mesh_surfaces(
+    mut commands: Commands,
+    debug: Res<SoftBodyDebug>,
+    fixed: Res<Time<Fixed>>,
+    meshes: Option<ResMut<Assets<Mesh>>>,
+    materials: Option<ResMut<Assets<StandardMaterial>>>,
+    mut q: Query<MeshSurfaceItem>,
+    mut scratch: Local<MeshScratch>,
+) {
+    let Some(mut meshes) = meshes else { return };
+    let mut materials = materials;
+    for (e, mut surface, (bs, prev), mesh3d, has_material) in &mut q {
+        let Some(sim) = bs.simulation() else { continue };
+        if !sim.state.is_finite() {
+            continue;
+        }
+        let Some(m) = mesh3d else {
+            let Some(source) = surface.source.take() else {
+                continue;
+            };
+            let mut mesh = (*source).clone();
+            mesh.asset_usage = RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD;
+            if mesh.attribute(Mesh::ATTRIBUTE_NORMAL).is_none() {
+                let n = mesh.count_vertices();
+                mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, vec![[0.0f32, 1.0, 0.0]; n]);
+            }
+            let mut ec = commands.entity(e);
+            ec.insert(Mesh3d(meshes.add(mesh)));
+            if !has_material && let Some(materials) = materials.as_mut() {
+                ec.insert(MeshMaterial3d(materials.add(StandardMaterial {
+                    base_color: surface.color,
+                    perceptual_roughness: 0.85,
+                    double_sided: true,
+                    cull_mode: None,
+                    ..default()
+                })));
+            }
+            continue;
+        };
+        let Some(mut mesh) = meshes.get_mut(&m.0) else {
+            continue;
+        };
+        let drawn = drawn_positions(bs, prev, alpha(&debug, &fixed));
+        let (particle_pos, tris, normals, index) = &mut *scratch;
+        // Each vertex's packed particle index (a vertex whose particle is gone keeps its
+        // position and shows the first particle's normal).
+        index.clear();
+        index.extend(
+            surface
+                .vertices
+                .iter()
+                .map(|p| bs.index_of(*p).map_or(u32::MAX, |i| i as u32)),
+        );
+        particle_pos.clear();
+        particle_pos.extend(drawn.iter().map(|p| p.to_array()));
+        tris.clear();
+        if let Some(ix) = mesh.indices() {
+            let ix: Vec<u32> = ix.iter().map(|i| i as u32).collect();
+            for c in ix.chunks_exact(3) {
+                let t =
+                    [c[0], c[1], c[2]].map(|v| index.get(v as usize).copied().unwrap_or(u32::MAX));
+                if t.iter().all(|i| (*i as usize) < particle_pos.len()) {
+                    tris.push(t);
+                }
+            }
+        }
+        normals.clear();
+        normals.resize(particle_pos.len(), [0.0; 3]);
+        smooth_normals(particle_pos, tris, normals);
+        if let Some(VertexAttributeValues::Float32x3(p)) =
+            mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+        {
+            for (out, i) in p.iter_mut().zip(index.iter()) {
+                if let Some(x) = particle_pos.get(*i as usize) {
+                    *out = *x;
+                }
+            }
+        }
+        if let Some(VertexAttributeValues::Float32x3(nrm)) =
+            mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
+        {
+            for (out, i) in nrm.iter_mut().zip(index.iter()) {
+                if let Some(n) = normals.get(*i as usize) {
+                    *out = *n;
+                }
+            }
+        }
+        if mesh.attribute(Mesh::ATTRIBUTE_TANGENT).is_some()
+            && mesh.attribute(Mesh::ATTRIBUTE_UV_0).is_some()
+            && let Err(err) = mesh.generate_tangents()
+        {
+            warn!("soft body {e}: tangents not regenerated: {err}");
         }
     }
 }

@@ -5,7 +5,8 @@
 //!
 //! Panel: body, integrator (every kind), step `h` (log slider), stiffness, damping and drag
 //! applied live, wind on/off, pause / step / reset, a live plot of kinetic, potential and
-//! total energy, ms per fixed step, and a particle inspector (pick particle `i`, list and
+//! total energy, ms per fixed step (the body's, and every body's with Newton and CG iterations
+//! from Bevy's `DiagnosticsStore`), and a particle inspector (pick particle `i`, list and
 //! highlight the springs attached to it).
 //!
 //! Keys: Space pause/resume, N single step while paused, R reset, W wind on/off, G wireframe,
@@ -275,8 +276,21 @@ fn panel(
     mut bodies: Query<PanelItem>,
     mut springs: Query<&mut Spring>,
     mut particles: Query<&mut Particle>,
+    diagnostics: Option<Res<bevy::diagnostic::DiagnosticsStore>>,
 ) -> Result {
     let ctx = contexts.ctx_mut()?;
+    // The whole step's cost, smoothed, from Bevy's diagnostics store.
+    let smoothed = |path: &bevy::diagnostic::DiagnosticPath| {
+        diagnostics
+            .as_ref()
+            .and_then(|d| d.get(path))
+            .and_then(|d| d.smoothed())
+    };
+    let all_ms = smoothed(&SoftBodyDiagnostics::STEP_TIME);
+    let (newton, cg) = (
+        smoothed(&SoftBodyDiagnostics::NEWTON_ITERATIONS),
+        smoothed(&SoftBodyDiagnostics::LINEAR_ITERATIONS),
+    );
     let sel = selected(&ui_state, bodies.iter().map(|b| b.0));
     let names: Vec<(Entity, String)> = bodies
         .iter()
@@ -342,6 +356,13 @@ fn panel(
                 "{} particles, {} springs, {} substeps, {:.2} ms per fixed step",
                 status.particles, status.springs, status.substeps, status.step_ms
             ));
+            if let Some(ms) = all_ms {
+                ui.label(format!(
+                    "all bodies: {ms:.2} ms per fixed step · Newton {:.1} · CG {:.0} per step",
+                    newton.unwrap_or(0.0),
+                    cg.unwrap_or(0.0)
+                ));
+            }
             match &status.state {
                 BodyState::Diverged(m) | BodyState::Invalid(m) => {
                     ui.colored_label(egui::Color32::from_rgb(255, 110, 90), m);
