@@ -24,6 +24,7 @@
 #![allow(clippy::unnecessary_cast)]
 
 use bevy_soft_body::core::ode::OdeSystem;
+use bevy_soft_body::math::ToScalar;
 use bevy_soft_body::prelude::*;
 use std::fmt::Write as _;
 use std::fs;
@@ -283,7 +284,7 @@ fn run(a: &Args) -> Result<(), String> {
                 build::circle_start()
             );
             fs::write(out.join("scene.json"), json).map_err(|e| e.to_string())?;
-            let x0 = bevy_soft_body::math::vec3(build::circle_start());
+            let x0 = build::circle_start().to_scalar();
             let mut sim = Simulation::new(CircleSystem, x0, config(a));
             let rows = |sim: &Simulation<Vector, CircleSystem>,
                         fc: &mut BufWriter<fs::File>,

@@ -7,7 +7,8 @@ mod prec {
     pub type Scalar = f32;
     /// A 3-vector of [`Scalar`]: glam's 16-byte SIMD `Vec3A`, which made the spring kernel
     /// 12–18 % faster than the 12-byte `Vec3` (docs/BENCHMARKS.md). Bevy's `Vec3` converts with
-    /// [`to_f32`](super::to_f32) / [`from_f32`](super::from_f32).
+    /// [`VectorExt::to_f32`](super::VectorExt::to_f32) and
+    /// [`ToScalar::to_scalar`](super::ToScalar::to_scalar).
     pub type Vector = glam::Vec3A;
     /// A 3×3 matrix of [`Scalar`] (blocks of sparse Jacobians).
     pub type Matrix3 = glam::Mat3A;
@@ -32,34 +33,69 @@ pub use prec::*;
 /// Machine epsilon of [`Scalar`].
 pub const EPS: Scalar = Scalar::EPSILON;
 
-/// Converts an `f64` (how layouts are described) to [`Scalar`].
-#[inline(always)]
-pub fn sc(x: f64) -> Scalar {
-    x as Scalar
+/// Conversion into the simulation's precision: `f64` and `[f64; 3]` (how layouts are
+/// described), `f32` and `glam::Vec3` (Bevy's and parry's precision) become [`Scalar`] and
+/// [`Vector`] with `.to_scalar()`.
+pub trait ToScalar {
+    /// [`Scalar`] or [`Vector`].
+    type Output;
+    /// The value in the simulation's precision.
+    fn to_scalar(self) -> Self::Output;
 }
 
-/// Converts a `[f64; 3]` (how layouts are described) to a [`Vector`].
-#[inline(always)]
-pub fn vec3(a: [f64; 3]) -> Vector {
-    Vector::new(a[0] as Scalar, a[1] as Scalar, a[2] as Scalar)
+impl ToScalar for f64 {
+    type Output = Scalar;
+    #[inline(always)]
+    fn to_scalar(self) -> Scalar {
+        self as Scalar
+    }
 }
 
-/// Converts a [`Vector`] to `[f64; 3]`.
-#[inline(always)]
-pub fn to_f64(v: Vector) -> [f64; 3] {
-    [v.x as f64, v.y as f64, v.z as f64]
+impl ToScalar for f32 {
+    type Output = Scalar;
+    #[inline(always)]
+    #[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a widening in the f64 one
+    fn to_scalar(self) -> Scalar {
+        self as Scalar
+    }
 }
 
-/// Converts a [`Vector`] to Bevy's / parry's `f32` vector.
-#[inline(always)]
-#[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a narrowing in the f64 one
-pub fn to_f32(v: Vector) -> glam::Vec3 {
-    glam::Vec3::new(v.x as f32, v.y as f32, v.z as f32)
+impl ToScalar for [f64; 3] {
+    type Output = Vector;
+    #[inline(always)]
+    fn to_scalar(self) -> Vector {
+        Vector::new(self[0] as Scalar, self[1] as Scalar, self[2] as Scalar)
+    }
 }
 
-/// Converts an `f32` vector (Bevy's, parry's) to a [`Vector`].
-#[inline(always)]
-#[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a widening in the f64 one
-pub fn from_f32(v: glam::Vec3) -> Vector {
-    Vector::new(v.x as Scalar, v.y as Scalar, v.z as Scalar)
+impl ToScalar for glam::Vec3 {
+    type Output = Vector;
+    #[inline(always)]
+    #[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a widening in the f64 one
+    fn to_scalar(self) -> Vector {
+        Vector::new(self.x as Scalar, self.y as Scalar, self.z as Scalar)
+    }
+}
+
+/// Conversion of a simulation [`Vector`] out to the world's forms: `.to_f32()` (Bevy's and
+/// parry's `Vec3`) and `.to_f64()` (`[f64; 3]`, how layouts are described).
+pub trait VectorExt {
+    /// As Bevy's / parry's `f32` vector.
+    fn to_f32(self) -> glam::Vec3;
+    /// As `[f64; 3]`.
+    fn to_f64(self) -> [f64; 3];
+}
+
+impl VectorExt for Vector {
+    #[inline(always)]
+    #[allow(clippy::unnecessary_cast)] // a no-op in the f32 build, a narrowing in the f64 one
+    fn to_f32(self) -> glam::Vec3 {
+        glam::Vec3::new(self.x as f32, self.y as f32, self.z as f32)
+    }
+
+    #[inline(always)]
+    #[allow(clippy::unnecessary_cast)] // a widening in the f32 build, a no-op in the f64 one
+    fn to_f64(self) -> [f64; 3] {
+        [self.x as f64, self.y as f64, self.z as f64]
+    }
 }

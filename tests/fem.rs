@@ -16,6 +16,7 @@ use bevy_soft_body::core::fem::element::{
 use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::fem::skin::{Skinning, read_obj};
 use bevy_soft_body::core::fem::{NeoHookean, Tets};
+use bevy_soft_body::math::ToScalar;
 use glam::{DMat3, DQuat, DVec3};
 
 /// A small deterministic generator (xorshift), so the tests need no crate.
@@ -253,7 +254,7 @@ fn tets_of(mesh: &TetMesh, m: &NeoHookean) -> Tets {
 
 type V = bevy_soft_body::math::Vector;
 fn to_v(p: DVec3) -> V {
-    bevy_soft_body::math::vec3(p.to_array())
+    p.to_array().to_scalar()
 }
 
 #[test]

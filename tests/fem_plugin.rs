@@ -15,7 +15,7 @@ use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::core::particles::ParticleModel;
 use bevy_soft_body::ecs::*;
-use bevy_soft_body::math::to_f32;
+use bevy_soft_body::math::{ToScalar, VectorExt};
 
 const FRAME: f64 = 1.0 / 64.0;
 
@@ -120,7 +120,7 @@ fn a_tet_body_steps_exactly_as_the_core_driver() {
             });
             model.tets.push(t.map(|i| i as usize), rest, &MAT).unwrap();
         }
-        model.gravity = bevy_soft_body::math::from_f32(Vec3::new(0.0, -9.81, 0.0));
+        model.gravity = Vec3::new(0.0, -9.81, 0.0).to_scalar();
         let bs = app.world().get::<BodySim>(e).unwrap();
         let sim0 = bs.simulation().unwrap();
         let state = sim0.state.clone();
@@ -171,7 +171,7 @@ fn a_tet_body_steps_exactly_as_the_core_driver() {
         for (p, x) in parts.iter().zip(&sim.state.x) {
             assert_eq!(
                 app.world().get::<Particle>(*p).unwrap().position,
-                to_f32(*x)
+                x.to_f32()
             );
         }
     }
@@ -258,7 +258,7 @@ fn the_skinned_display_follows_the_body() {
     skin.skinning.apply(&q, &mut out);
     // The corner vertex (0,1,0) is a tet vertex: W picks it exactly.
     let corner = bs.index_of(skin.vertices[0]).unwrap();
-    assert_eq!(out[2], to_f32(sim.state.x[corner]).to_array());
+    assert_eq!(out[2], sim.state.x[corner].to_f32().to_array());
     // The body fell freely for 20 frames: every display point fell with it. Backward Euler's
     // free fall after n steps is g h² n (n + 1) / 2 (not ½ g t²).
     let n = 20.0f32;

@@ -14,7 +14,7 @@ use bevy_soft_body::core::fem::element::{DVec3, element_forces};
 use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::fem::{NeoHookean, Tets};
 use bevy_soft_body::core::forces::{SpringLaw, Springs};
-use bevy_soft_body::math::{EPS, Scalar, Vector, to_f64};
+use bevy_soft_body::math::{EPS, Scalar, ToScalar, Vector, VectorExt};
 
 struct Rng(u64);
 impl Rng {
@@ -70,8 +70,8 @@ fn network(seed: u64, n: usize, m: usize, damped: bool) -> (Springs, Vec<Vector>
 fn spring_scale(s: &Springs, x: &[Vector], v: &[Vector]) -> Vec<f64> {
     let mut scale = vec![0.0; x.len()];
     for sp in s.as_slice() {
-        let d = DVec3::from_array(to_f64(x[sp.i as usize] - x[sp.j as usize]));
-        let w = DVec3::from_array(to_f64(v[sp.i as usize] - v[sp.j as usize]));
+        let d = DVec3::from_array((x[sp.i as usize] - x[sp.j as usize]).to_f64());
+        let w = DVec3::from_array((v[sp.i as usize] - v[sp.j as usize]).to_f64());
         let l = d.length();
         let mag = sp.k as f64 * (l - sp.rest as f64).abs() + sp.damping as f64 * w.length();
         scale[sp.i as usize] += mag;
@@ -157,7 +157,7 @@ fn deformed_box(seed: u64) -> (Tets, Vec<Vector>) {
     let mut x: Vec<Vector> = mesh
         .vertices
         .iter()
-        .map(|p| bevy_soft_body::math::vec3(*p) + Vector::new(1.0, -2.0, 0.5))
+        .map(|p| p.to_scalar() + Vector::new(1.0, -2.0, 0.5))
         .collect();
     for xi in x.iter_mut() {
         *xi += r.vec(0.003);
@@ -184,7 +184,7 @@ fn tet_kernel_equals_the_f64_reference_to_round_off() {
     // scale `2(C + D) |g| V` per element, which bounds the round-off of P near rest.
     let mut scale = vec![0.0; x.len()];
     for t in tets.as_slice() {
-        let xs = t.v.map(|i| DVec3::from_array(to_f64(x[i as usize])));
+        let xs = t.v.map(|i| DVec3::from_array(x[i as usize].to_f64()));
         let fe = element_forces(&t.material, &t.rest, xs);
         let stress = 2.0 * (t.material.c + t.material.d) * t.rest.volume;
         for a in 0..4 {
@@ -216,7 +216,7 @@ fn kernels_give_the_same_bits_on_one_and_two_threads() {
             (f, g)
         })
     };
-    let bits = |a: &[Vector]| a.iter().map(|v| to_f64(*v)).collect::<Vec<_>>();
+    let bits = |a: &[Vector]| a.iter().map(|v| v.to_f64()).collect::<Vec<_>>();
     let (f1, g1) = run(1);
     let (f2, g2) = run(2);
     assert_eq!(bits(&f1), bits(&f2));
@@ -256,7 +256,7 @@ fn a_simulation_is_the_same_bits_on_one_and_two_threads() {
         let bits = |s: &ParticleState| {
             s.x.iter()
                 .chain(&s.v)
-                .map(|v| to_f64(*v))
+                .map(|v| v.to_f64())
                 .collect::<Vec<_>>()
         };
         assert_eq!(bits(&a), bits(&b), "{}", scene.name);
@@ -302,7 +302,7 @@ fn fused_symplectic_euler_is_derivative_then_kick_drift() {
         let bits = |s: &ParticleState| {
             s.x.iter()
                 .chain(&s.v)
-                .map(|v| to_f64(*v))
+                .map(|v| v.to_f64())
                 .collect::<Vec<_>>()
         };
         for k in 0..200 {

@@ -15,7 +15,7 @@ use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::core::motion::Motion;
 use bevy_soft_body::core::scene::Scene;
 use bevy_soft_body::ecs::*;
-use bevy_soft_body::math::to_f32;
+use bevy_soft_body::math::VectorExt;
 use bevy_soft_body::render::SoftBodySurface;
 
 /// 1/64 s: exactly representable, so the plugin's frame (from `Time<Fixed>`'s `Duration`) and
@@ -108,7 +108,7 @@ fn plugin_steps_a_pendulum_bitwise_like_the_core_driver() {
     assert_eq!(ecs.time, core.time);
     assert_eq!(ecs.state.x, core.state.x, "positions differ");
     assert_eq!(ecs.state.v, core.state.v, "velocities differ");
-    let expected: Vec<Vec3> = core.state.x.iter().map(|x| to_f32(*x)).collect();
+    let expected: Vec<Vec3> = core.state.x.iter().map(|x| x.to_f32()).collect();
     assert_eq!(
         particles_of(&app, e),
         expected,
@@ -242,7 +242,7 @@ fn cloth_sphere_through_the_plugin_tracks_the_core_driver() {
         let xs = particles_of(&app, e);
         let mut w = 0.0f32;
         for (a, b) in xs.iter().zip(&core.state.x) {
-            w = w.max(a.distance(to_f32(*b)));
+            w = w.max(a.distance(b.to_f32()));
         }
         worst = worst.max(w);
     }

@@ -5,6 +5,7 @@
 
 use bevy::prelude::*;
 use bevy_egui::{EguiContexts, EguiPrimaryContextPass, egui};
+use bevy_soft_body::math::VectorExt;
 use bevy_soft_body::prelude::*;
 
 /// The circle's simulation, drawn at `origin` with radius `scale`.
@@ -61,7 +62,7 @@ fn step(
         return;
     }
     if c.sim.advance_frame().is_ok() {
-        let p = c.origin + bevy_soft_body::math::to_f32(c.sim.state) * c.scale;
+        let p = c.origin + c.sim.state.to_f32() * c.scale;
         c.trail.push(p);
         if c.trail.len() > 2000 {
             c.trail.remove(0);

@@ -6,7 +6,7 @@
 //! shape goes through parry3d's point projection (in `f32`, parry's precision).
 
 use crate::core::motion::Motion;
-use crate::math::{Scalar, Vector, from_f32, to_f32, vec3};
+use crate::math::{Scalar, ToScalar, Vector, VectorExt};
 use parry3d::math::{Pose3, Rot3};
 use parry3d::shape::SharedShape;
 use serde::{Deserialize, Serialize};
@@ -44,7 +44,9 @@ impl ShapeDesc {
     pub fn to_shared(&self) -> SharedShape {
         match *self {
             ShapeDesc::Sphere { radius } => SharedShape::ball(radius as f32),
-            ShapeDesc::Plane { normal } => SharedShape::halfspace(to_f32(vec3(normal)).normalize()),
+            ShapeDesc::Plane { normal } => {
+                SharedShape::halfspace(normal.to_scalar().to_f32().normalize())
+            }
             ShapeDesc::Cuboid { half_extents: h } => {
                 SharedShape::cuboid(h[0] as f32, h[1] as f32, h[2] as f32)
             }
@@ -171,7 +173,7 @@ impl Collider {
         let fast = if let Some(b) = shape.as_ball() {
             Fast::Sphere(b.radius as Scalar)
         } else if let Some(h) = shape.as_halfspace() {
-            Fast::Plane(from_f32(rotation * h.normal))
+            Fast::Plane((rotation * h.normal).to_scalar())
         } else {
             Fast::General
         };
@@ -214,8 +216,8 @@ impl Collider {
                 }
             }
             Fast::General => {
-                let pose = Pose3::from_parts(to_f32(c), self.rotation);
-                let pf = to_f32(p);
+                let pose = Pose3::from_parts(c.to_f32(), self.rotation);
+                let pf = p.to_f32();
                 let proj = self.shape.project_point(&pose, pf, true);
                 let d = pf - proj.point;
                 let dist = d.length();
@@ -226,11 +228,11 @@ impl Collider {
                     } else {
                         (glam::Vec3::Y, 0.0)
                     };
-                    let n = from_f32(n);
-                    Some((from_f32(proj.point) + n * thick, n))
+                    let n = n.to_scalar();
+                    Some((proj.point.to_scalar() + n * thick, n))
                 } else if (dist as Scalar) < thick && dist > 1e-9 {
-                    let n = from_f32(d / dist);
-                    Some((from_f32(proj.point) + n * thick, n))
+                    let n = (d / dist).to_scalar();
+                    Some((proj.point.to_scalar() + n * thick, n))
                 } else {
                     None
                 }

@@ -14,7 +14,7 @@ use crate::core::forces::PackedSpring;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
 use crate::core::solve::SpringMatrix;
-use crate::math::{Matrix3, Scalar, Vector, to_f64};
+use crate::math::{Matrix3, Scalar, Vector, VectorExt};
 
 fn outer(a: Vector, b: Vector) -> Matrix3 {
     Matrix3::from_cols(a * b.x, a * b.y, a * b.z)
@@ -462,7 +462,7 @@ impl Linearization for ParticleModel {
         for ((xi, x0i), vi) in x.iter_mut().zip(x0).zip(v) {
             *xi = *x0i + *vi * h;
         }
-        let d64 = |a: Vector| glam::DVec3::from_array(to_f64(a));
+        let d64 = |a: Vector| glam::DVec3::from_array(a.to_f64());
         let h64 = h as f64;
         let pos = |i: usize| d64(x0[i]) + d64(v[i]) * h64;
         let mut phi = 0.0f64;

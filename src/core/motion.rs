@@ -2,7 +2,7 @@
 //! rotating wire endpoint of the PhysBAM slides, a cloth corner held by a hand) and moving
 //! colliders (the swinging sphere). Position, velocity and acceleration are exact.
 
-use crate::math::{Scalar, Vector, vec3};
+use crate::math::{Scalar, ToScalar, Vector};
 use serde::{Deserialize, Serialize};
 
 /// A trajectory `p(t)`.
@@ -69,14 +69,14 @@ impl Motion {
     /// Position, velocity and acceleration at time `t`.
     pub fn eval(&self, t: Scalar) -> (Vector, Vector, Vector) {
         match *self {
-            Motion::Fixed { position } => (vec3(position), Vector::ZERO, Vector::ZERO),
+            Motion::Fixed { position } => (position.to_scalar(), Vector::ZERO, Vector::ZERO),
             Motion::Linear {
                 start,
                 velocity,
                 t0,
             } => {
-                let v = vec3(velocity);
-                (vec3(start) + v * (t - t0 as Scalar), v, Vector::ZERO)
+                let v = velocity.to_scalar();
+                (start.to_scalar() + v * (t - t0 as Scalar), v, Vector::ZERO)
             }
             Motion::Circle {
                 center,
@@ -88,9 +88,13 @@ impl Motion {
             } => {
                 let (r, w) = (radius as Scalar, omega as Scalar);
                 let (s, c) = (w * t + phase as Scalar).sin_cos();
-                let (a, b) = (vec3(a), vec3(b));
+                let (a, b) = (a.to_scalar(), b.to_scalar());
                 let p = (a * s + b * c) * r;
-                (vec3(center) + p, (a * c - b * s) * (r * w), -p * (w * w))
+                (
+                    center.to_scalar() + p,
+                    (a * c - b * s) * (r * w),
+                    -p * (w * w),
+                )
             }
             Motion::Oscillate {
                 center,
@@ -100,8 +104,12 @@ impl Motion {
             } => {
                 let w = omega as Scalar;
                 let (s, c) = (w * t + phase as Scalar).sin_cos();
-                let amp = vec3(amplitude);
-                (vec3(center) + amp * s, amp * (w * c), -amp * (w * w * s))
+                let amp = amplitude.to_scalar();
+                (
+                    center.to_scalar() + amp * s,
+                    amp * (w * c),
+                    -amp * (w * w * s),
+                )
             }
         }
     }

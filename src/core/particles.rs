@@ -10,7 +10,7 @@ use crate::core::fem::Tets;
 use crate::core::forces::{Springs, Wind, WindField};
 use crate::core::motion::Motion;
 use crate::core::ode::{Energy, OdeSystem, ParticleState};
-use crate::math::{Scalar, Vector};
+use crate::math::{Scalar, ToScalar, Vector};
 
 /// How a particle's degrees of freedom are governed.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -554,7 +554,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
             .as_ref()
             .map_or(0.0, |e| e.iter().map(|f| f.length()).sum());
         let wind = self.wind.as_ref().map_or(0.0, |(w, _)| {
-            let speed = crate::math::vec3(w.velocity).length() + w.gust as Scalar * 3.0;
+            let speed = w.velocity.to_scalar().length() + w.gust as Scalar * 3.0;
             0.5 * total_mass * speed * speed
         });
         let motion: Scalar = self

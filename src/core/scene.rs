@@ -8,7 +8,7 @@ use crate::core::forces::{SpringLaw, Wind};
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
-use crate::math::{sc, vec3};
+use crate::math::ToScalar;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -447,12 +447,16 @@ impl Scene {
     /// The initial state.
     pub fn initial_state(&self) -> ParticleState {
         ParticleState {
-            x: self.particles.iter().map(|p| vec3(p.position)).collect(),
+            x: self
+                .particles
+                .iter()
+                .map(|p| p.position.to_scalar())
+                .collect(),
             v: self
                 .particles
                 .iter()
                 .map(|p| if p.pinned { [0.0; 3] } else { p.velocity })
-                .map(vec3)
+                .map(ToScalar::to_scalar)
                 .collect(),
         }
     }
@@ -478,10 +482,11 @@ impl Scene {
     pub fn build(&self) -> Result<(ParticleModel, ParticleState), SceneError> {
         self.validate()?;
         let state = self.initial_state();
-        let mut model = ParticleModel::new(self.particles.iter().map(|p| sc(p.mass)).collect());
+        let mut model =
+            ParticleModel::new(self.particles.iter().map(|p| p.mass.to_scalar()).collect());
         for (i, p) in self.particles.iter().enumerate() {
             if p.pinned {
-                model.pin(i, vec3(p.position));
+                model.pin(i, p.position.to_scalar());
             }
         }
         for m in &self.motions {
@@ -491,9 +496,9 @@ impl Scene {
             model.springs.push(
                 s.a,
                 s.b,
-                sc(self.rest_length(k)),
-                sc(s.stiffness),
-                sc(s.damping),
+                self.rest_length(k).to_scalar(),
+                s.stiffness.to_scalar(),
+                s.damping.to_scalar(),
                 s.law,
             );
         }
@@ -505,11 +510,11 @@ impl Scene {
             // Validated above: cannot fail.
             let _ = model.tets.push(t.vertices, x, &m);
         }
-        model.gravity = vec3(self.gravity);
-        model.drag = sc(self.drag);
+        model.gravity = self.gravity.to_scalar();
+        model.drag = self.drag.to_scalar();
         model.set_wind(self.wind);
         for f in &self.forces {
-            model.set_external_force(f.particle, vec3(f.force));
+            model.set_external_force(f.particle, f.force.to_scalar());
         }
         model.colliders = self.colliders.iter().map(Collider::from_desc).collect();
         model.validate().map_err(|e| SceneError {

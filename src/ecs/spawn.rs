@@ -2,6 +2,7 @@
 
 use super::components::*;
 use crate::core::scene::{Scene, SceneError};
+use crate::math::VectorExt;
 use crate::render::SoftBodySurface;
 use bevy::prelude::*;
 
@@ -203,7 +204,7 @@ pub(crate) fn spawn_scene(
             ));
         }
         for m in &scene.motions {
-            let start = crate::math::to_f32(m.motion.position(0.0));
+            let start = m.motion.position(0.0).to_f32();
             let target = this
                 .spawn((
                     Name::new("prescribed path"),
@@ -229,10 +230,9 @@ pub(crate) fn spawn_scene(
 /// Spawns one collider of a scene (with its scripted motion when it moves).
 fn spawn_collider(commands: &mut Commands, c: &crate::core::collide::ColliderDesc) -> Entity {
     let q = c.rotation;
-    let tf = Transform::from_translation(crate::math::to_f32(c.motion.position(0.0)))
-        .with_rotation(
-            Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32).normalize(),
-        );
+    let tf = Transform::from_translation(c.motion.position(0.0).to_f32()).with_rotation(
+        Quat::from_xyzw(q[0] as f32, q[1] as f32, q[2] as f32, q[3] as f32).normalize(),
+    );
     let mut e = commands.spawn((
         SoftBodyCollider {
             shape: ColliderShape(c.shape.to_shared()),

@@ -6,7 +6,7 @@
 
 use crate::core::ode::OdeState;
 use crate::ecs::plugin::BodySim;
-use crate::math::to_f32;
+use crate::math::VectorExt;
 use bevy::asset::RenderAssetUsages;
 use bevy::ecs::schedule::ScheduleLabel;
 use bevy::mesh::{Indices, PrimitiveTopology, VertexAttributeValues};
@@ -293,7 +293,7 @@ fn snapshot_previous(
         if body.paused || bs.is_diverged() {
             continue;
         }
-        let x = sim.state.x.iter().map(|x| to_f32(*x));
+        let x = sim.state.x.iter().map(|x| x.to_f32());
         match prev {
             Some(mut p) => {
                 p.0.clear();
@@ -315,7 +315,7 @@ fn drawn_positions(
     let Some(sim) = bs.simulation() else {
         return vec![];
     };
-    let cur = sim.state.x.iter().map(|x| to_f32(*x));
+    let cur = sim.state.x.iter().map(|x| x.to_f32());
     match (alpha, prev) {
         (Some(a), Some(p)) if p.0.len() == sim.state.x.len() => {
             cur.zip(&p.0).map(|(c, p)| p.lerp(c, a)).collect()

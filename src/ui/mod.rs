@@ -18,7 +18,7 @@ use crate::core::driver::StepPolicy;
 use crate::core::integrate::IntegratorKind;
 use crate::core::ode::OdeSystem;
 use crate::ecs::*;
-use crate::math::to_f32;
+use crate::math::VectorExt;
 use crate::render::{SoftBodyDebug, SoftBodyGizmos};
 use bevy::prelude::*;
 use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
@@ -530,8 +530,8 @@ fn panel(
                 if n > 0 {
                     ui.small(format!(
                         "x = {:.3}  v = {:.3}  m = {}",
-                        to_f32(sim.state.x[i]),
-                        to_f32(sim.state.v[i]),
+                        sim.state.x[i].to_f32(),
+                        sim.state.v[i].to_f32(),
                         sim.system.mass()[i]
                     ));
                     egui::ScrollArea::vertical().max_height(120.0).show(ui, |ui| {
@@ -574,11 +574,11 @@ fn highlight(ui: Res<SoftBodyUi>, mut gizmos: Gizmos, bodies: Query<(Entity, &Bo
         return;
     }
     let orange = Color::srgb(1.0, 0.55, 0.1);
-    gizmos.sphere(Isometry3d::from_translation(to_f32(x[i])), 0.015, orange);
+    gizmos.sphere(Isometry3d::from_translation(x[i].to_f32()), 0.015, orange);
     for s in sim.system.springs.as_slice() {
         let (a, b) = (s.i as usize, s.j as usize);
         if a == i || b == i {
-            gizmos.line(to_f32(x[a]), to_f32(x[b]), orange);
+            gizmos.line(x[a].to_f32(), x[b].to_f32(), orange);
         }
     }
 }
@@ -633,7 +633,7 @@ fn grab(
             .map(|s| s.k as f32)
             .fold(0.0, f32::max);
         for (i, x) in sim.state.x.iter().enumerate() {
-            let p = to_f32(*x);
+            let p = x.to_f32();
             let along = (p - ray.origin).dot(*ray.direction);
             if along <= 0.0 {
                 continue;

@@ -7,7 +7,7 @@ pub mod element;
 pub mod mesh;
 pub mod skin;
 
-use crate::math::{Matrix3, Scalar, Vector, to_f64};
+use crate::math::{Matrix3, Scalar, ToScalar, Vector, VectorExt};
 use element::{EDGES, NeoHookeanConstants, RestShape};
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
@@ -144,11 +144,11 @@ impl Clone for LazyTetForces {
 }
 
 fn d(v: Vector) -> DVec3 {
-    DVec3::from_array(to_f64(v))
+    DVec3::from_array(v.to_f64())
 }
 
 fn to_matrix(m: &DMat3) -> Matrix3 {
-    let c = |v: DVec3| crate::math::vec3(v.to_array());
+    let c = |v: DVec3| v.to_array().to_scalar();
     Matrix3::from_cols(c(m.x_axis), c(m.y_axis), c(m.z_axis))
 }
 
@@ -260,7 +260,7 @@ impl Tets {
         for t in &self.tets {
             let fe = element::element_forces(&t.material, &t.rest, Self::positions(t, x));
             for (a, fa) in fe.iter().enumerate() {
-                f[t.v[a] as usize] += crate::math::vec3(fa.to_array());
+                f[t.v[a] as usize] += fa.to_array().to_scalar();
             }
         }
     }
@@ -332,7 +332,7 @@ impl Tets {
                     for b in 0..4 {
                         acc += k[a][b] * d(v[t.v[b] as usize]);
                     }
-                    kv[t.v[a] as usize] -= crate::math::vec3(acc.to_array());
+                    kv[t.v[a] as usize] -= acc.to_array().to_scalar();
                 }
             }
             for a in 0..4 {

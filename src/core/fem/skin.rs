@@ -9,6 +9,7 @@
 
 use super::mesh::TetMesh;
 use crate::math::Vector;
+use crate::math::VectorExt;
 use glam::{DMat3, DVec3};
 
 /// The skinning matrix: four (tet vertex, weight) pairs per display vertex.
@@ -181,7 +182,7 @@ impl Skinning {
         for ((o, idx), w) in out.iter_mut().zip(&self.indices).zip(&self.weights) {
             let mut p = glam::Vec3::ZERO;
             for k in 0..4 {
-                p += crate::math::to_f32(q[idx[k] as usize]) * w[k];
+                p += (q[idx[k] as usize]).to_f32() * w[k];
             }
             *o = p.to_array();
         }

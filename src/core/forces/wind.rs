@@ -5,7 +5,7 @@
 //! constant `−c I` in velocity. The breeze is a sum of three sines per axis whose frequencies
 //! and phases come from the seed.
 
-use crate::math::{Scalar, Vector};
+use crate::math::{Scalar, ToScalar, Vector};
 use serde::{Deserialize, Serialize};
 
 /// Wind settings.
@@ -78,7 +78,7 @@ impl Wind {
             }
         }
         WindField {
-            mean: crate::math::vec3(self.velocity),
+            mean: self.velocity.to_scalar(),
             coefficient: self.coefficient as Scalar,
             gust: self.gust as Scalar,
             omega,

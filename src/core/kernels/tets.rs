@@ -15,7 +15,7 @@
 use super::{SharedMut, for_each_chunk};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
-use crate::math::{Scalar, Vector};
+use crate::math::{Scalar, ToScalar, Vector};
 use std::sync::Mutex;
 
 /// Elements per chunk of the element pass.
@@ -51,7 +51,7 @@ impl TetForces {
             .iter()
             .map(|t| Element {
                 v: t.v,
-                g: [1, 2, 3].map(|a| crate::math::vec3(t.rest.grad[a].to_array())),
+                g: [1, 2, 3].map(|a| t.rest.grad[a].to_array().to_scalar()),
                 volume: s(t.rest.volume),
                 c: s(t.material.c),
                 d: s(t.material.d),

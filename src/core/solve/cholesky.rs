@@ -9,7 +9,7 @@
 //! (no allocation per solve).
 
 use super::{PcgReport, SpringMatrix};
-use crate::math::{Scalar, Vector};
+use crate::math::{Scalar, ToScalar, Vector};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::cholesky::{
@@ -398,7 +398,7 @@ impl SparseCholesky {
             let c = an.free[i];
             if c != u32::MAX {
                 let s = 3 * c as usize;
-                x[i] = crate::math::vec3([self.rhs[s], self.rhs[s + 1], self.rhs[s + 2]]);
+                x[i] = ([self.rhs[s], self.rhs[s + 1], self.rhs[s + 2]]).to_scalar();
             }
         }
         // The residual, for the report (one product; direct solves should reach round-off).

@@ -1,0 +1,276 @@
+//! [`SoftBodyPlugin`]: gathers each body's components into the core's packed model (only when
+//! something changed), advances every body in parallel with the core driver — substeps that
+//! land exactly on the fixed frame's end, collisions every substep, the divergence guard — and
+//! writes the state back to the components.
+
+use super::components::*;
+use crate::core::driver::{Divergence, Simulation};
+use crate::core::motion::Motion;
+use crate::core::ode::{OdeState, ParticleState};
+use crate::core::particles::ParticleModel;
+use crate::math::{Scalar, ToScalar, VectorExt};
+use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
+use bevy::prelude::*;
+use std::collections::HashMap;
+
+mod motion;
+mod rebuild;
+mod step;
+use motion::scripted_motion;
+use rebuild::prepare;
+use step::{reset, step, tick, writeback};
+
+/// Soft-body physics. Runs in `FixedUpdate` by default ([`SoftBodyPlugin::new`] picks another
+/// schedule), in the chained sets [`SoftBodySystems`]; meshes and debug drawing follow in
+/// `PostUpdate`, once per frame.
+#[derive(Debug, Clone)]
+pub struct SoftBodyPlugin {
+    schedule: InternedScheduleLabel,
+    kernel_threads: usize,
+}
+
+impl Default for SoftBodyPlugin {
+    fn default() -> Self {
+        Self::new(FixedUpdate)
+    }
+}
+
+impl SoftBodyPlugin {
+    /// Runs the simulation in `schedule` (the frame length is still `Time<Fixed>`'s timestep).
+    pub fn new(schedule: impl ScheduleLabel) -> Self {
+        Self {
+            schedule: schedule.intern(),
+            kernel_threads: 0,
+        }
+    }
+
+    /// Threads that share the force evaluation of one large body (a cloth of thousands of
+    /// springs, a body of thousands of tets; small bodies always run on one thread): `0`, the
+    /// default, uses every core; `1` steps each body on one thread. Bodies are stepped in
+    /// parallel with each other either way, and the results are the same bits for any count.
+    /// Needs the `parallel` feature (on by default); without it every body uses one thread.
+    pub fn with_kernel_threads(mut self, threads: usize) -> Self {
+        self.kernel_threads = threads;
+        self
+    }
+}
+
+/// The thread pool large bodies' force kernels share (see
+/// [`SoftBodyPlugin::with_kernel_threads`]); `None`: one thread per body.
+#[derive(Resource, Clone, Default)]
+pub struct SoftBodyKernelPool {
+    #[cfg(feature = "parallel")]
+    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+}
+
+impl SoftBodyKernelPool {
+    /// A pool of `threads` threads (`0`: every core; `1`: none).
+    pub fn new(threads: usize) -> Self {
+        #[cfg(feature = "parallel")]
+        {
+            let threads = if threads == 0 {
+                std::thread::available_parallelism().map_or(1, |n| n.get())
+            } else {
+                threads
+            };
+            let pool = (threads > 1)
+                .then(|| {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .thread_name(|i| format!("soft-body kernels {i}"))
+                        .build()
+                        .ok()
+                })
+                .flatten()
+                .map(std::sync::Arc::new);
+            Self { pool }
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            let _ = threads;
+            Self {}
+        }
+    }
+
+    /// Number of threads a large body's kernels use.
+    pub fn threads(&self) -> usize {
+        #[cfg(feature = "parallel")]
+        {
+            self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+        }
+        #[cfg(not(feature = "parallel"))]
+        {
+            1
+        }
+    }
+
+    /// Advances `sim` one frame, on the pool when the body is large enough to be cut into
+    /// chunks.
+    fn advance(
+        &self,
+        sim: &mut Simulation<ParticleState, ParticleModel>,
+    ) -> Result<crate::core::driver::FrameReport, Divergence> {
+        #[cfg(feature = "parallel")]
+        if let Some(pool) = &self.pool
+            && sim.system.is_chunked()
+        {
+            return pool.install(|| sim.advance_frame());
+        }
+        sim.advance_frame()
+    }
+}
+
+impl std::fmt::Debug for SoftBodyKernelPool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SoftBodyKernelPool")
+            .field("threads", &self.threads())
+            .finish()
+    }
+}
+
+/// The schedule [`SoftBodyPlugin`] steps in (a resource, for plugins that add systems beside
+/// its sets).
+#[derive(Resource, Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SoftBodySchedule(pub InternedScheduleLabel);
+
+/// The phases of a soft-body step, chained in this order in the plugin's schedule
+/// (`FixedUpdate` by default); order your systems against them, as with avian's
+/// `PhysicsSystems`.
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SoftBodySystems {
+    /// Before anything the plugin does in the frame (empty: for the app's own systems, e.g.
+    /// moving pin targets or colliders that the step should see this frame).
+    First,
+    /// Topology and parameter changes → packed core model (rebuilt only when something
+    /// changed); teleports, pin targets and collider poses applied.
+    Prepare,
+    /// Every body advanced by one fixed frame in substeps (forces, integration, collisions),
+    /// bodies in parallel. Forces, integration and collision run inside this one set rather
+    /// than as systems of their own: a multi-stage method (RK4, the implicit methods' Newton
+    /// iterations) evaluates the forces several times per substep, and a frame has many
+    /// substeps.
+    Step,
+    /// Core state → [`Particle`] components (and their `Transform`s), messages, events and
+    /// diagnostics sent.
+    Writeback,
+    /// After everything the plugin does in the frame (empty: for the app's own systems that
+    /// read this frame's result).
+    Last,
+}
+
+/// The former name of [`SoftBodySystems`].
+#[deprecated(
+    since = "0.1.0",
+    note = "renamed `SoftBodySystems`, as avian's `PhysicsSystems`"
+)]
+pub type SoftBodySet = SoftBodySystems;
+
+impl Plugin for SoftBodyPlugin {
+    fn build(&self, app: &mut App) {
+        app.register_type::<SoftBody>()
+            .register_type::<SoftBodyStatus>()
+            .register_type::<Particle>()
+            .register_type::<ParticleOf>()
+            .register_type::<BodyParticles>()
+            .register_type::<Spring>()
+            .register_type::<Tet>()
+            .register_type::<TetOf>()
+            .register_type::<BodyTets>()
+            .register_type::<ElasticMaterial>()
+            .register_type::<LinearSolverChoice>()
+            .register_type::<SpringOf>()
+            .register_type::<BodySprings>()
+            .register_type::<Pinned>()
+            .register_type::<ExternalForce>()
+            .register_type::<SoftBodyWind>()
+            .register_type::<GlobalWind>()
+            .register_type::<SoftBodyCollider>()
+            .register_type::<ScriptedMotion>()
+            .register_type::<SoftBodyClock>()
+            .register_type::<SoftBodyInitial>()
+            .init_resource::<SoftBodyClock>()
+            .insert_resource(SoftBodyKernelPool::new(self.kernel_threads))
+            .add_message::<ResetSoftBodies>()
+            .init_resource::<GlobalWind>()
+            .insert_resource(SoftBodySchedule(self.schedule))
+            .add_message::<SoftBodyDiverged>()
+            .add_message::<SoftBodyInvalid>()
+            .configure_sets(
+                self.schedule,
+                (
+                    SoftBodySystems::First,
+                    SoftBodySystems::Prepare,
+                    SoftBodySystems::Step,
+                    SoftBodySystems::Writeback,
+                    SoftBodySystems::Last,
+                )
+                    .chain(),
+            )
+            .add_systems(
+                self.schedule,
+                (
+                    (reset, scripted_motion, prepare)
+                        .chain()
+                        .in_set(SoftBodySystems::Prepare),
+                    step.in_set(SoftBodySystems::Step),
+                    (writeback, super::diagnostics::measure, tick)
+                        .chain()
+                        .in_set(SoftBodySystems::Writeback),
+                ),
+            );
+        super::diagnostics::register(app);
+    }
+}
+
+/// The packed core simulation of one body (internal).
+#[derive(Component, Default)]
+pub struct BodySim {
+    pub(crate) sim: Option<Simulation<ParticleState, ParticleModel>>,
+    /// Particle entity of each packed index.
+    pub(crate) particles: Vec<Entity>,
+    /// Packed index of each particle entity.
+    index: HashMap<Entity, u32>,
+    /// Spring entities in the body's relationship order (the packed list may skip some).
+    pub(crate) springs: Vec<Entity>,
+    /// Tet entities in the body's relationship order.
+    pub(crate) tets: Vec<Entity>,
+    /// Positions and velocities as last written to the components (to tell user edits apart).
+    written: Vec<(Vec3, Vec3)>,
+    /// Particles following a target: index, target, offset, target's last position.
+    follow: Vec<(u32, Entity, Vec3, Vec3)>,
+    /// Pinned-in-place particle indices (editing their position moves the pin).
+    fixed_pins: Vec<u32>,
+    problem: Option<String>,
+    diverged: Option<Divergence>,
+    report: bool,
+    frame_dt: f64,
+}
+
+impl BodySim {
+    /// The core simulation, once built.
+    pub fn simulation(&self) -> Option<&Simulation<ParticleState, ParticleModel>> {
+        self.sim.as_ref()
+    }
+
+    /// Stopped by a divergence (kept at its last good state until rebuilt or reset).
+    pub fn is_diverged(&self) -> bool {
+        self.diverged.is_some()
+    }
+
+    /// The particle entity of each packed index.
+    pub fn particle_entities(&self) -> &[Entity] {
+        &self.particles
+    }
+
+    /// The packed index of a particle entity of this body.
+    pub fn index_of(&self, particle: Entity) -> Option<usize> {
+        self.index.get(&particle).map(|i| *i as usize)
+    }
+}
+
+/// A collider's pose at the previous fixed step (internal: its velocity comes from the
+/// change).
+#[derive(Component, Default)]
+pub struct ColliderTrack {
+    prev: Option<(Vec3, Quat)>,
+}

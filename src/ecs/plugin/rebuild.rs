@@ -1,0 +1,388 @@
+//! Rebuild detection and user changes: a body whose topology or parameters changed is
+//! gathered again from its components into a packed core model; otherwise particles the user
+//! moved are teleported; then pins and colliders are placed for the coming frame.
+
+use super::motion::{update_colliders, update_follow, v3};
+use super::*;
+use crate::core::driver::{DriverConfig, StepPolicy};
+use crate::core::particles::ModelError;
+
+type ParticleItem<'a> = (
+    Ref<'a, Particle>,
+    Option<Ref<'a, Pinned>>,
+    Option<Ref<'a, ExternalForce>>,
+);
+
+/// A body's finite elements, for a rebuild.
+struct FemInput<'a, 'w, 's> {
+    list: &'a [Entity],
+    tets: &'a Query<'w, 's, Ref<'static, Tet>>,
+    material: Option<NeoHookean>,
+    solver: SolverChoice,
+}
+
+/// Tets, tets edited this frame, tets and materials removed.
+type TetParams<'w, 's> = (
+    Query<'w, 's, Ref<'static, Tet>>,
+    Query<'w, 's, &'static TetOf, Changed<Tet>>,
+    RemovedComponents<'w, 's, Tet>,
+    RemovedComponents<'w, 's, ElasticMaterial>,
+);
+
+/// What a rebuild produced.
+struct Built {
+    sim: Simulation<ParticleState, ParticleModel>,
+    particles: Vec<Entity>,
+    index: HashMap<Entity, u32>,
+    follow: Vec<(u32, Entity, Vec3, Vec3)>,
+    fixed_pins: Vec<u32>,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_body(
+    body_e: Entity,
+    body: &SoftBody,
+    wind: Option<SoftBodyWind>,
+    list: &[Entity],
+    spring_list: &[Entity],
+    particles: &Query<ParticleItem>,
+    springs: &Query<Ref<Spring>>,
+    targets: &Query<&GlobalTransform>,
+    frame_dt: f64,
+    fem: FemInput,
+) -> Result<Built, String> {
+    let mut ents = Vec::with_capacity(list.len());
+    let mut index = HashMap::with_capacity(list.len());
+    for &e in list {
+        if particles.contains(e) {
+            index.insert(e, ents.len() as u32);
+            ents.push(e);
+        }
+    }
+    if ents.is_empty() {
+        return Err(format!("soft body {body_e} has no particles"));
+    }
+    let mut state = ParticleState::zeros(ents.len());
+    let mut masses = Vec::with_capacity(ents.len());
+    for (i, &e) in ents.iter().enumerate() {
+        let (p, _, _) = particles.get(e).expect("checked above");
+        if !p.position.is_finite() || !p.velocity.is_finite() {
+            return Err(format!(
+                "particle {e}: position {} or velocity {} is not finite",
+                p.position, p.velocity
+            ));
+        }
+        state.x[i] = p.position.to_scalar();
+        state.v[i] = p.velocity.to_scalar();
+        masses.push(p.mass as Scalar);
+    }
+    let mut model = ParticleModel::new(masses);
+    let (mut follow, mut fixed_pins) = (vec![], vec![]);
+    for (i, &e) in ents.iter().enumerate() {
+        let (p, pin, force) = particles.get(e).expect("checked above");
+        if let Some(pin) = pin {
+            match pin.target {
+                None => {
+                    model.pin(i, state.x[i]);
+                    fixed_pins.push(i as u32);
+                }
+                Some(t) => match targets.get(t) {
+                    Ok(gt) => {
+                        let at = gt.transform_point(pin.offset);
+                        model.prescribe(i, Motion::Fixed { position: v3(at) });
+                        state.x[i] = at.to_scalar();
+                        follow.push((i as u32, t, pin.offset, at));
+                    }
+                    Err(_) => {
+                        warn!(
+                            "particle {e}: pin target {t} has no GlobalTransform; pinned in place"
+                        );
+                        model.pin(i, p.position.to_scalar());
+                        fixed_pins.push(i as u32);
+                    }
+                },
+            }
+        }
+        if let Some(f) = force {
+            model.set_external_force(i, f.0.to_scalar());
+        }
+    }
+    // The entity behind each packed spring, to name it in errors.
+    let mut packed_springs = Vec::with_capacity(spring_list.len());
+    for &se in spring_list {
+        let Ok(s) = springs.get(se) else {
+            continue;
+        };
+        match (index.get(&s.a), index.get(&s.b)) {
+            (Some(&a), Some(&b)) if a == b => warn!(
+                "soft body {body_e}: spring {se} joins particle {} to itself; the spring is left out",
+                s.a
+            ),
+            (Some(&a), Some(&b)) => {
+                model.springs.push(
+                    a as usize,
+                    b as usize,
+                    s.rest_length as Scalar,
+                    s.stiffness as Scalar,
+                    s.damping as Scalar,
+                    s.law,
+                );
+                packed_springs.push(se);
+            }
+            _ => warn!(
+                "soft body {body_e}: spring {se} joins {} and {}, which are not both particles of this body; the spring is left out",
+                s.a, s.b
+            ),
+        }
+    }
+    for &te in fem.list {
+        let Ok(t) = fem.tets.get(te) else {
+            continue;
+        };
+        let idx = t.particles.map(|p| index.get(&p).copied());
+        let Some(v) = (idx[0].zip(idx[1]).zip(idx[2]).zip(idx[3]))
+            .map(|(((a, b), c), d)| [a as usize, b as usize, c as usize, d as usize])
+        else {
+            warn!(
+                "soft body {body_e}: tet {te} uses an entity that is not a particle of this body; the tet is left out"
+            );
+            continue;
+        };
+        let material = match t.material.or(fem.material) {
+            Some(m) => m,
+            None => {
+                return Err(format!(
+                    "tet {te}: no material (give the tet one, or the body an ElasticMaterial)"
+                ));
+            }
+        };
+        let rest = t
+            .rest
+            .map(|p| glam::DVec3::new(p.x as f64, p.y as f64, p.z as f64));
+        if let Err(e) = model.tets.push(v, rest, &material) {
+            return Err(format!("tet {te}: {e}"));
+        }
+    }
+    model.gravity = (body.gravity.unwrap_or(Vec3::new(0.0, -9.81, 0.0))).to_scalar();
+    model.drag = body.drag as Scalar;
+    model.set_wind(wind.map(Into::into));
+    if let Err(e) = model.validate() {
+        // Name the entity behind the packed index.
+        let spring_entity = |k: usize| packed_springs.get(k).copied();
+        return Err(match e {
+            ModelError::BadMass { particle, mass } => format!(
+                "particle {}: mass {mass} must be positive and finite unless the particle is pinned",
+                ents[particle]
+            ),
+            ModelError::BadSpring { spring, reason } => match spring_entity(spring) {
+                Some(se) => format!("spring {se}: {reason}"),
+                None => format!("soft body {body_e}: spring {spring}: {reason}"),
+            },
+            other => format!("soft body {body_e}: {other}"),
+        });
+    }
+    match body.step {
+        StepPolicy::Fixed { h } if !(h.is_finite() && h > 0.0) => {
+            return Err(format!(
+                "soft body {body_e}: step h = {h} must be a positive number"
+            ));
+        }
+        StepPolicy::Cfl { number, max, .. }
+            if !(number.is_finite() && number > 0.0 && max.is_finite() && max > 0.0) =>
+        {
+            return Err(format!(
+                "soft body {body_e}: CFL number {number} and cap {max} must be positive numbers"
+            ));
+        }
+        _ => {}
+    }
+    if let Some(g) = body.energy_guard
+        && !(g.is_finite() && g > 0.0)
+    {
+        return Err(format!(
+            "soft body {body_e}: energy guard {g} must be a positive number"
+        ));
+    }
+    let config = DriverConfig {
+        integrator: body.integrator,
+        policy: body.step,
+        frame_dt,
+        energy_guard: body.energy_guard.map(|g| g as f64),
+        solver: fem.solver,
+        ..Default::default()
+    };
+    Ok(Built {
+        sim: Simulation::new(model, state, config),
+        particles: ents,
+        index,
+        follow,
+        fixed_pins,
+    })
+}
+
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+pub(super) fn prepare(
+    fixed: Res<Time<Fixed>>,
+    global_wind: Res<GlobalWind>,
+    mut bodies: Query<(
+        Entity,
+        Ref<SoftBody>,
+        &mut BodySim,
+        &mut SoftBodyStatus,
+        Option<&BodyParticles>,
+        Option<&BodySprings>,
+        Option<Ref<SoftBodyWind>>,
+        (
+            Option<&BodyTets>,
+            Option<Ref<ElasticMaterial>>,
+            Option<Ref<LinearSolverChoice>>,
+        ),
+    )>,
+    (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
+    particles: Query<ParticleItem>,
+    springs: Query<Ref<Spring>>,
+    changed_springs: Query<&SpringOf, Changed<Spring>>,
+    changed_setup: Query<&ParticleOf, Or<(Changed<Pinned>, Changed<ExternalForce>)>>,
+    targets: Query<&GlobalTransform>,
+    colliders: Query<(&SoftBodyCollider, &GlobalTransform, &ColliderTrack)>,
+    mut removed_particles: RemovedComponents<Particle>,
+    mut removed_springs: RemovedComponents<Spring>,
+    mut removed_pins: RemovedComponents<Pinned>,
+    mut removed_forces: RemovedComponents<ExternalForce>,
+    mut removed_winds: RemovedComponents<SoftBodyWind>,
+    (mut invalid, mut commands): (MessageWriter<SoftBodyInvalid>, Commands),
+) {
+    let frame_dt = fixed.timestep().as_secs_f64();
+    // Removals cannot be traced to their body once despawned: every body re-checks.
+    let removed = removed_particles.read().count()
+        + removed_springs.read().count()
+        + removed_pins.read().count()
+        + removed_forces.read().count()
+        + removed_winds.read().count()
+        + removed_tets.read().count()
+        + removed_materials.read().count()
+        > 0;
+    // Bodies whose springs, pins or forces were edited (one pass over the changed ones, not a
+    // lookup per spring of every body).
+    let mut edited: Vec<Entity> = changed_springs.iter().map(|s| s.0).collect();
+    edited.extend(changed_setup.iter().map(|p| p.0));
+    edited.extend(changed_tets.iter().map(|t| t.0));
+    edited.sort_unstable();
+    edited.dedup();
+    let no_list: &[Entity] = &[];
+    for (body_e, body, mut bs, mut status, plist, slist, wind, (tlist, material, solver)) in
+        &mut bodies
+    {
+        let plist = plist.map_or(no_list, |p| p.entities());
+        let slist = slist.map_or(no_list, |s| s.entities());
+        let tlist = tlist.map_or(no_list, |t| t.entities());
+        let bs = &mut *bs;
+        let mut dirty = bs.sim.is_none() && bs.problem.is_none()
+            || body.is_changed()
+            || removed
+            || global_wind.is_changed()
+            || wind.as_ref().is_some_and(|w| w.is_changed())
+            || bs.frame_dt != frame_dt
+            || bs.springs.as_slice() != slist
+            || bs.tets.as_slice() != tlist
+            || material.as_ref().is_some_and(|m| m.is_changed())
+            || solver.as_ref().is_some_and(|m| m.is_changed())
+            || bs.particles.len() != plist.len()
+            || bs.particles.as_slice() != plist;
+        dirty |= edited.binary_search(&body_e).is_ok();
+        if !dirty && bs.problem.is_some() {
+            // Left out for bad input: retry when any of its particles is edited.
+            dirty = plist.iter().any(|e| {
+                particles.get(*e).is_ok_and(|(p, pin, f)| {
+                    p.is_changed()
+                        || pin.is_some_and(|p| p.is_changed())
+                        || f.is_some_and(|f| f.is_changed())
+                })
+            });
+        }
+        if !dirty && let Some(sim) = bs.sim.as_mut() {
+            // Per particle: pins, forces and masses changed → rebuild; position or velocity
+            // edited (not by our writeback) → teleport.
+            let masses = sim.system.mass();
+            for (i, &e) in bs.particles.iter().enumerate() {
+                let Ok((p, _, _)) = particles.get(e) else {
+                    dirty = true;
+                    break;
+                };
+                if p.mass as Scalar != masses[i] {
+                    dirty = true;
+                    break;
+                }
+                let (wx, wv) = bs.written[i];
+                if p.position != wx || p.velocity != wv {
+                    if bs.fixed_pins.contains(&(i as u32)) {
+                        dirty = true;
+                        break;
+                    }
+                    if p.position.is_finite() && p.velocity.is_finite() {
+                        sim.state.x[i] = p.position.to_scalar();
+                        sim.state.v[i] = p.velocity.to_scalar();
+                        bs.written[i] = (p.position, p.velocity);
+                    } else {
+                        warn!("particle {e}: non-finite position or velocity ignored (kept {wx})");
+                    }
+                }
+            }
+        }
+        if dirty {
+            bs.diverged = None;
+            bs.report = false;
+            bs.frame_dt = frame_dt;
+            bs.springs = slist.to_vec();
+            bs.tets = tlist.to_vec();
+            let wind = wind.map(|w| *w).or(global_wind.0);
+            let fem = FemInput {
+                list: tlist,
+                tets: &tets,
+                material: material.map(|m| m.0),
+                solver: solver.map_or(SolverChoice::Auto, |s| s.0),
+            };
+            match build_body(
+                body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt, fem,
+            ) {
+                Ok(b) => {
+                    bs.written = b
+                        .particles
+                        .iter()
+                        .map(|e| {
+                            let (p, _, _) = particles.get(*e).expect("built from these");
+                            (p.position, p.velocity)
+                        })
+                        .collect();
+                    status.particles = b.particles.len() as u32;
+                    status.rebuilds += 1;
+                    status.springs = b.sim.system.springs.len() as u32;
+                    status.tets = b.sim.system.tets.len() as u32;
+                    bs.sim = Some(b.sim);
+                    bs.particles = b.particles;
+                    bs.index = b.index;
+                    bs.follow = b.follow;
+                    bs.fixed_pins = b.fixed_pins;
+                    bs.problem = None;
+                    status.state = BodyState::Running;
+                }
+                Err(msg) => {
+                    warn!("{msg}; the body is left out of stepping");
+                    let event = SoftBodyInvalid {
+                        body: body_e,
+                        message: msg.clone(),
+                    };
+                    commands.trigger(event.clone());
+                    invalid.write(event);
+                    bs.sim = None;
+                    bs.particles = plist.to_vec();
+                    bs.problem = Some(msg.clone());
+                    status.state = BodyState::Invalid(msg);
+                }
+            }
+        } else {
+            update_follow(bs, &targets);
+        }
+        update_colliders(bs, &colliders, frame_dt);
+    }
+}
