@@ -33,6 +33,16 @@ fn io_error(file: &str, e: impl std::fmt::Display) -> MeshError {
     }
 }
 
+/// A whole asset file as UTF-8 text, or what went wrong (the I/O error, or "not UTF-8 text").
+async fn read_text(reader: &mut dyn Reader) -> Result<String, String> {
+    let mut bytes = Vec::new();
+    reader
+        .read_to_end(&mut bytes)
+        .await
+        .map_err(|e| e.to_string())?;
+    String::from_utf8(bytes).map_err(|_| "not UTF-8 text".to_string())
+}
+
 impl AssetLoader for TetMeshLoader {
     type Asset = TetMeshAsset;
     type Settings = ();
@@ -46,12 +56,7 @@ impl AssetLoader for TetMeshLoader {
     ) -> Result<TetMeshAsset, MeshError> {
         let path = ctx.path().path().to_path_buf();
         let name = path.display().to_string();
-        let mut bytes = Vec::new();
-        reader
-            .read_to_end(&mut bytes)
-            .await
-            .map_err(|e| io_error(&name, e))?;
-        let text = String::from_utf8(bytes).map_err(|_| io_error(&name, "not UTF-8 text"))?;
+        let text = read_text(reader).await.map_err(|e| io_error(&name, e))?;
         let mesh = match path.extension().and_then(|e| e.to_str()) {
             Some("msh") => TetMesh::from_gmsh(&name, &text)?,
             Some("node") => {
@@ -121,12 +126,7 @@ impl AssetLoader for SoftBodySceneLoader {
                 }],
             },
         };
-        let mut bytes = Vec::new();
-        reader
-            .read_to_end(&mut bytes)
-            .await
-            .map_err(|e| fail(e.to_string()))?;
-        let text = String::from_utf8(bytes).map_err(|_| fail("not UTF-8 text".into()))?;
+        let text = read_text(reader).await.map_err(fail)?;
         let scene = Scene::from_json(&text).map_err(|error| SceneFileError {
             file: file.clone(),
             error,
@@ -206,12 +206,7 @@ impl AssetLoader for ObjMeshLoader {
         ctx: &mut LoadContext<'_>,
     ) -> Result<Mesh, MeshError> {
         let name = ctx.path().path().display().to_string();
-        let mut bytes = Vec::new();
-        reader
-            .read_to_end(&mut bytes)
-            .await
-            .map_err(|e| io_error(&name, e))?;
-        let text = String::from_utf8(bytes).map_err(|_| io_error(&name, "not UTF-8 text"))?;
+        let text = read_text(reader).await.map_err(|e| io_error(&name, e))?;
         let (v, f) = crate::core::fem::skin::read_obj(&name, &text)?;
         let mut normals = vec![[0.0; 3]; v.len()];
         crate::render::smooth_normals(&v, &f, &mut normals);

@@ -498,10 +498,9 @@ fn sync_mesh_surfaces(
         particle_pos.extend(drawn.iter().map(|p| p.to_array()));
         tris.clear();
         if let Some(ix) = mesh.indices() {
-            let ix: Vec<u32> = ix.iter().map(|i| i as u32).collect();
-            for c in ix.chunks_exact(3) {
-                let t =
-                    [c[0], c[1], c[2]].map(|v| index.get(v as usize).copied().unwrap_or(u32::MAX));
+            let mut ix = ix.iter();
+            while let (Some(a), Some(b), Some(c)) = (ix.next(), ix.next(), ix.next()) {
+                let t = [a, b, c].map(|v| index.get(v).copied().unwrap_or(u32::MAX));
                 if t.iter().all(|i| (*i as usize) < particle_pos.len()) {
                     tris.push(t);
                 }
