@@ -11,7 +11,6 @@ use bevy::asset::{AssetPath, LoadFromPath, UntypedHandle};
 use bevy::ecs::entity::EntityHashMap;
 use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy::world_serialization::serde::WorldDeserializer;
 use bevy::world_serialization::{DynamicWorld, DynamicWorldBuilder};
 use bevy_soft_body::core::build;
@@ -26,12 +25,7 @@ use std::any::TypeId;
 const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
-    let mut app = App::new();
-    app.add_plugins((MinimalPlugins, TransformPlugin, common::headless_plugins()))
-        .insert_resource(Time::<Fixed>::from_seconds(FRAME))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
-    app.update(); // the first update has zero delta: no fixed step
-    app
+    common::headless_app(FRAME)
 }
 
 fn cloth() -> bevy_soft_body::core::scene::Scene {

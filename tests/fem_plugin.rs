@@ -8,7 +8,6 @@
 mod common;
 use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
@@ -20,12 +19,7 @@ use bevy_soft_body::math::{ToScalar, VectorExt};
 const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
-    let mut app = App::new();
-    app.add_plugins((MinimalPlugins, TransformPlugin, common::headless_plugins()))
-        .insert_resource(Time::<Fixed>::from_seconds(FRAME))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
-    app.update();
-    app
+    common::headless_app(FRAME)
 }
 
 fn body(kind: IntegratorKind) -> SoftBody {

@@ -8,7 +8,6 @@
 
 mod common;
 use bevy::prelude::*;
-use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::build;
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
 use bevy_soft_body::core::integrate::IntegratorKind;
@@ -23,12 +22,7 @@ use bevy_soft_body::render::SoftBodySurface;
 const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
-    let mut app = App::new();
-    app.add_plugins((MinimalPlugins, TransformPlugin, common::headless_plugins()))
-        .insert_resource(Time::<Fixed>::from_seconds(FRAME))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
-    app.update(); // the first update has zero delta: no fixed step
-    app
+    common::headless_app(FRAME)
 }
 
 fn spawn(app: &mut App, scene: &Scene, body: SoftBody) -> Entity {

@@ -7,6 +7,8 @@ pub use plugin::*;
 #[cfg(feature = "plugin")]
 mod plugin {
     use bevy::app::{PluginGroup, PluginGroupBuilder};
+    use bevy::prelude::*;
+    use bevy::time::TimeUpdateStrategy;
 
     /// `SoftBodyPlugins` for a headless app: everything but the egui panel (which needs a
     /// window).
@@ -15,5 +17,17 @@ mod plugin {
         #[cfg(feature = "egui")]
         let group = group.disable::<bevy_soft_body::ui::SoftBodyUiPlugin>();
         group
+    }
+
+    /// A headless app (`MinimalPlugins`, transforms, [`headless_plugins`]) whose every
+    /// `update` runs exactly one fixed step of `frame` seconds, past its first update (which
+    /// has zero delta and steps nothing).
+    pub fn headless_app(frame: f64) -> App {
+        let mut app = App::new();
+        app.add_plugins((MinimalPlugins, TransformPlugin, headless_plugins()))
+            .insert_resource(Time::<Fixed>::from_seconds(frame))
+            .insert_resource(TimeUpdateStrategy::FixedTimesteps(1));
+        app.update();
+        app
     }
 }
