@@ -236,6 +236,7 @@ impl Progress {
 }
 
 fn run(a: &Args) -> Result<(), String> {
+    config(a).validate()?;
     let (name, scene) = match &a.scene_file {
         Some(path) => {
             let text = fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;

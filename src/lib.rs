@@ -32,6 +32,8 @@
 
 #[cfg(feature = "plugin")]
 pub mod assets;
+#[cfg(feature = "avian")]
+pub mod avian;
 pub mod core;
 #[cfg(feature = "plugin")]
 pub mod ecs;
@@ -47,7 +49,7 @@ pub mod ui;
 pub mod prelude {
     pub use crate::core::build;
     pub use crate::core::build::{SurfaceParams, SurfaceStiffness};
-    pub use crate::core::collide::{Collider, ColliderDesc, ContactMaterial, ShapeDesc};
+    pub use crate::core::collide::{ColliderDesc, ContactMaterial, ShapeDesc};
     pub use crate::core::driver::{
         CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
     };
@@ -68,6 +70,10 @@ pub mod prelude {
     pub use crate::assets::{
         SoftBodyAssetPlugin, SoftBodySceneAsset, SoftBodySceneRoot, SoftBodySceneSpawned,
         TetMeshAsset,
+    };
+    #[cfg(feature = "avian")]
+    pub use crate::avian::{
+        NoSoftBodyContact, SoftBodyAvianPlugin, SoftBodyAvianSettings, SoftBodyImpulse,
     };
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{

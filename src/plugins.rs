@@ -16,6 +16,7 @@ use bevy::prelude::*;
 /// | [`SoftBodyRenderPlugin`] | deforming surface and skinned meshes, collider meshes |
 /// | [`SoftBodyAssetPlugin`] | tet meshes (`.msh`, `.mesh`, `.node`) as assets |
 /// | [`SoftBodyDebugPlugin`] | gizmos ([`SoftBodyGizmos`](crate::render::SoftBodyGizmos)) |
+/// | `SoftBodyAvianPlugin` (feature `avian`) | coupling with avian3d's rigid bodies |
 /// | `SoftBodyUiPlugin` (feature `egui`) | the live-tuning panel, keys, mouse grab |
 ///
 /// ```no_run
@@ -68,6 +69,8 @@ impl PluginGroup for SoftBodyPlugins {
             .add(SoftBodyRenderPlugin)
             .add(SoftBodyAssetPlugin::default())
             .add(SoftBodyDebugPlugin);
+        #[cfg(feature = "avian")]
+        let group = group.add(crate::avian::SoftBodyAvianPlugin);
         #[cfg(feature = "egui")]
         let group = group.add(crate::ui::SoftBodyUiPlugin);
         group

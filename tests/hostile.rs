@@ -176,7 +176,7 @@ fn bad_parameters_name_their_entity() {
     for (body, culprit, word) in [
         (empty, empty, "no particles"),
         (neg, pn[0], "mass"),
-        (nanv, pv[0], "not finite"),
+        (nanv, pv[0], "velocity must be finite"),
         (nank, sk, "spring"),
         (negk, sg, "spring"),
         (zero_cfl, zero_cfl, "CFL"),
@@ -187,4 +187,172 @@ fn bad_parameters_name_their_entity() {
     }
     assert_eq!(state(&app, good), BodyState::Running);
     assert!(positions(&app, good).iter().all(|x| x.is_finite()));
+}
+
+/// One path from layout to model: the same broken number, written once into a scene and once
+/// into the components of the body spawned from the valid scene, is refused by both faces, and
+/// both name the same field (the scene by its path, the plugin by the entity and the field).
+/// (A non-finite position or velocity written into a running body is a teleport, ignored with
+/// a warning; a body built with one is left out, as `bad_parameters_name_their_entity` shows.)
+#[test]
+fn the_plugin_and_the_scene_refuse_the_same_inputs() {
+    use bevy_soft_body::core::forces::{SpringLaw, Wind};
+    use bevy_soft_body::core::scene::ForceDesc;
+    let base = build::chain(&build::ChainParams {
+        particles: 5,
+        ..Default::default()
+    })
+    .unwrap();
+    assert!(base.validate().is_ok());
+    type SceneEdit = fn(&mut bevy_soft_body::core::scene::Scene);
+    type WorldEdit = fn(&mut World, Entity, &[Entity], &[Entity]);
+    // (scene path, what the plugin's message must name, the edit in both forms)
+    let cases: Vec<(&str, &str, SceneEdit, WorldEdit)> = vec![
+        (
+            "particles[3].mass",
+            "mass",
+            |s| s.particles[3].mass = 0.0,
+            |w, _, p, _| w.get_mut::<Particle>(p[3]).unwrap().mass = 0.0,
+        ),
+        (
+            "particles[2].position",
+            "position",
+            |s| s.particles[2].position[1] = f64::NAN,
+            |w, _, p, _| w.get_mut::<Particle>(p[2]).unwrap().position.y = f32::NAN,
+        ),
+        (
+            "particles[2].velocity",
+            "velocity",
+            |s| s.particles[2].velocity[0] = f64::INFINITY,
+            |w, _, p, _| w.get_mut::<Particle>(p[2]).unwrap().velocity.x = f32::INFINITY,
+        ),
+        (
+            "springs[1].stiffness",
+            "stiffness",
+            |s| s.springs[1].stiffness = -1.0,
+            |w, _, _, k| w.get_mut::<Spring>(k[1]).unwrap().stiffness = -1.0,
+        ),
+        (
+            "springs[1].damping",
+            "damping",
+            |s| s.springs[1].damping = f64::NAN,
+            |w, _, _, k| w.get_mut::<Spring>(k[1]).unwrap().damping = f32::NAN,
+        ),
+        (
+            "springs[0].rest_length",
+            "rest_length",
+            |s| {
+                s.springs[0].law = SpringLaw::Strain;
+                s.springs[0].rest_length = Some(0.0);
+            },
+            |w, _, _, k| {
+                let mut s = w.get_mut::<Spring>(k[0]).unwrap();
+                s.law = SpringLaw::Strain;
+                s.rest_length = 0.0;
+            },
+        ),
+        (
+            "forces[0].force",
+            "force",
+            |s| {
+                s.forces.push(ForceDesc {
+                    particle: 4,
+                    force: [0.0, f64::NAN, 0.0],
+                })
+            },
+            |w, _, p, _| {
+                w.entity_mut(p[4])
+                    .insert(ExternalForce(Vec3::new(0.0, f32::NAN, 0.0)));
+            },
+        ),
+        (
+            "gravity",
+            "gravity",
+            |s| s.gravity[0] = f64::NAN,
+            |w, b, _, _| w.get_mut::<SoftBody>(b).unwrap().gravity = Some(Vec3::NAN),
+        ),
+        (
+            "drag",
+            "drag",
+            |s| s.drag = -1.0,
+            |w, b, _, _| w.get_mut::<SoftBody>(b).unwrap().drag = -1.0,
+        ),
+        (
+            "wind",
+            "wind",
+            |s| {
+                s.wind = Some(Wind {
+                    coefficient: -1.0,
+                    ..Default::default()
+                })
+            },
+            |w, b, _, _| {
+                w.entity_mut(b).insert(SoftBodyWind {
+                    coefficient: -1.0,
+                    ..Default::default()
+                });
+            },
+        ),
+    ];
+    for (path, field, scene_edit, world_edit) in cases {
+        let mut scene = base.clone();
+        scene_edit(&mut scene);
+        let err = scene.validate().expect_err(path);
+        assert!(err.has(path), "{path}: scene says {err}");
+
+        let mut app = app();
+        let spawned = base.clone();
+        let b = app
+            .world_mut()
+            .run_system_once(move |mut c: Commands| {
+                c.spawn_soft_body(&spawned, SoftBody::default()).unwrap()
+            })
+            .unwrap();
+        app.update();
+        assert_eq!(state(&app, b), BodyState::Running, "{path}");
+        let particles = app
+            .world()
+            .get::<BodyParticles>(b)
+            .unwrap()
+            .entities()
+            .to_vec();
+        let springs = app
+            .world()
+            .get::<BodySprings>(b)
+            .unwrap()
+            .entities()
+            .to_vec();
+        world_edit(app.world_mut(), b, &particles, &springs);
+        app.update();
+        app.update();
+        if field == "position" || field == "velocity" {
+            // On a running body, editing a position or velocity is a teleport; a non-finite
+            // one is refused by ignoring it (with a warning): the body runs on and the
+            // component is written back finite.
+            assert_eq!(state(&app, b), BodyState::Running, "{path}");
+            let w = app.world();
+            assert!(particles.iter().all(|e| {
+                let p = w.get::<Particle>(*e).unwrap();
+                p.position.is_finite() && p.velocity.is_finite()
+            }));
+            continue;
+        }
+        let BodyState::Invalid(msg) = state(&app, b) else {
+            panic!("{path}: the plugin accepted what the scene refused");
+        };
+        assert!(msg.contains(field), "{path}: plugin says {msg}");
+        // The culprit entity is named where there is one.
+        let culprit = match path.split('[').next().unwrap() {
+            "particles" => particles[path[10..11].parse::<usize>().unwrap()],
+            "springs" => springs[path[8..9].parse::<usize>().unwrap()],
+            "forces" => particles[4],
+            _ => b,
+        };
+        assert!(
+            msg.contains(&culprit.to_string()),
+            "{path}: {msg} names not {culprit}"
+        );
+        // Nothing non-finite reached the world.
+        assert!(positions(&app, b).iter().all(|x| x.is_finite()));
+    }
 }

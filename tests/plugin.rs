@@ -590,7 +590,7 @@ fn bad_input_leaves_the_body_out_with_a_message_naming_the_culprit() {
     let m = invalid(nan);
     println!("{m}");
     assert!(
-        m.contains(&np.to_string()) && m.contains("not finite"),
+        m.contains(&np.to_string()) && m.contains("position must be finite"),
         "{m}"
     );
     let m = invalid(zero_h);

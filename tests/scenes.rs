@@ -4,8 +4,9 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+use bevy_soft_body::core::motion::Motion;
 use bevy_soft_body::core::ode::OdeSystem;
-use bevy_soft_body::core::scene::SpringKind;
+use bevy_soft_body::core::scene::{ForceDesc, MotionDesc, SpringKind};
 use bevy_soft_body::prelude::*;
 
 const F64: bool = cfg!(feature = "f64");
@@ -190,6 +191,35 @@ fn invalid_scenes_are_rejected_with_their_field_paths() {
         ),
         (|s| s.gravity[2] = f64::NAN, "gravity"),
         (|s| s.drag = -1.0, "drag"),
+        (
+            |s| {
+                s.motions.push(MotionDesc {
+                    particle: 2,
+                    motion: Motion::Fixed {
+                        position: [0.0, f64::NAN, 0.0],
+                    },
+                })
+            },
+            "motions[0].motion",
+        ),
+        (
+            |s| {
+                s.motions.push(MotionDesc {
+                    particle: 40,
+                    motion: Motion::Fixed { position: [0.0; 3] },
+                })
+            },
+            "motions[0].particle",
+        ),
+        (
+            |s| {
+                s.forces.push(ForceDesc {
+                    particle: 1,
+                    force: [f64::INFINITY, 0.0, 0.0],
+                })
+            },
+            "forces[0].force",
+        ),
     ];
     for (mutate, path) in cases {
         let mut s = base();
@@ -198,9 +228,17 @@ fn invalid_scenes_are_rejected_with_their_field_paths() {
         assert!(err.has(path), "expected an error at {path}, got: {err}");
         assert!(s.build().is_err());
     }
-    // A pinned particle may have zero mass.
+    // A pinned particle may have zero mass, and so may a moved one.
     let mut s = base();
     s.particles[0].mass = 0.0;
+    s.validate().unwrap();
+    s.particles[2].mass = 0.0;
+    s.motions.push(MotionDesc {
+        particle: 2,
+        motion: Motion::Fixed {
+            position: s.particles[2].position,
+        },
+    });
     s.validate().unwrap();
     // All problems are reported at once.
     let mut s = base();

@@ -4,11 +4,20 @@
 //!
 //! Spheres and planes are handled analytically (in the crate's precision); every other
 //! shape goes through parry3d's point projection (in `f32`, parry's precision).
+//!
+//! A collider moves over the frame as a rigid body: its centre follows a [`Motion`] and it
+//! turns about that centre at a constant angular velocity ([`Spin`]), so a contact sees the
+//! surface velocity `v + ω × r`. A collider with a [`Response`] is a dynamic rigid body of
+//! finite mass: each contact impulse is computed with the pair's effective mass (the
+//! particle's inverse mass plus the body's `1/M + (r × n)·I⁻¹(r × n)`, as in a rigid-body
+//! sequential-impulse solver), the body's velocity changes at once for the particles after it,
+//! and the impulses it received are summed for the rigid-body engine to apply (momentum is
+//! exchanged exactly: what the particles gain, the body loses).
 
 use crate::core::motion::Motion;
 use crate::math::{Scalar, ToScalar, Vector, VectorExt};
 use parry3d::math::{Pose3, Rot3};
-use parry3d::shape::SharedShape;
+pub use parry3d::shape::SharedShape;
 use serde::{Deserialize, Serialize};
 
 /// A collider's shape, as layouts describe it.
@@ -124,31 +133,175 @@ fn identity_quat() -> [f64; 4] {
 
 enum Fast {
     Sphere(Scalar),
+    /// The half-space's normal in the collider's frame.
     Plane(Vector),
     General,
+}
+
+/// How a collider turns over the frame: at `angular_velocity` (rad/s, world frame, constant)
+/// about `center` (a point given in the collider's own frame, the origin by default), starting
+/// from its `rotation` at time `t0`. The collider's `motion` is the path of that centre.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Spin {
+    /// Angular velocity (rad/s, world frame).
+    pub angular_velocity: Vector,
+    /// The time at which the orientation is the collider's `rotation`.
+    pub t0: Scalar,
+    /// Centre of rotation in the collider's frame (a rigid body's centre of mass).
+    pub center: Vector,
+}
+
+/// A dynamic rigid body behind a collider, for the duration of one frame starting at `t0`:
+/// its inverse mass and world inverse inertia tensor (about its centre, the [`Spin::center`]),
+/// the acceleration it has without contacts (gravity), and what the particles gave it so far.
+///
+/// Within the frame the body moves as the particles push it: its centre's velocity is the
+/// collider's path velocity plus `gravity·τ` plus the impulses received so far over `M`, and
+/// its position follows that velocity (each impulse `J` received at `τ_k` moves it by
+/// `J (τ − τ_k)/M`); its angular velocity and orientation likewise, to first order in the
+/// frame's rotation. The rigid-body engine reproduces the same end state from the
+/// [`Exchange`] (see [`Exchange::split`]).
+#[derive(Debug, Default)]
+pub struct Response {
+    /// `1/M` (1/kg); zero: infinitely heavy.
+    pub inv_mass: Scalar,
+    /// World-frame `I⁻¹` as three rows (1/(kg·m²)).
+    pub inv_inertia: [Vector; 3],
+    /// Acceleration of the free body (m/s²): the rigid-body engine's gravity on it.
+    pub gravity: Vector,
+    /// Start of the frame.
+    pub t0: Scalar,
+    exchange: std::sync::Mutex<Exchange>,
+}
+
+impl Clone for Response {
+    fn clone(&self) -> Self {
+        Self {
+            inv_mass: self.inv_mass,
+            inv_inertia: self.inv_inertia,
+            gravity: self.gravity,
+            t0: self.t0,
+            exchange: std::sync::Mutex::new(self.exchange()),
+        }
+    }
+}
+
+impl Response {
+    /// A body of inverse mass `inv_mass` and world inverse inertia rows `inv_inertia`, free of
+    /// gravity, for a frame starting at `t0`.
+    pub fn new(inv_mass: Scalar, inv_inertia: [Vector; 3], t0: Scalar) -> Self {
+        Self {
+            inv_mass,
+            inv_inertia,
+            gravity: Vector::ZERO,
+            t0,
+            exchange: Default::default(),
+        }
+    }
+
+    /// The same body falling at `gravity` when free.
+    pub fn with_gravity(mut self, gravity: Vector) -> Self {
+        self.gravity = gravity;
+        self
+    }
+
+    /// What the particles gave the body since it was made or last [taken](Response::take).
+    pub fn exchange(&self) -> Exchange {
+        *self.exchange.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Returns the exchange and starts a new one.
+    pub fn take(&self) -> Exchange {
+        std::mem::take(&mut *self.exchange.lock().unwrap_or_else(|e| e.into_inner()))
+    }
+
+    fn inv_inertia_mul(&self, v: Vector) -> Vector {
+        let r = &self.inv_inertia;
+        Vector::new(r[0].dot(v), r[1].dot(v), r[2].dot(v))
+    }
+
+    /// `1/M + (r × d)·I⁻¹(r × d)`: the body's inverse mass seen along `d` at arm `r`.
+    fn inverse_mass_along(&self, r: Vector, d: Vector) -> Scalar {
+        let rd = r.cross(d);
+        self.inv_mass + rd.dot(self.inv_inertia_mul(rd))
+    }
+}
+
+/// Impulses the particles gave a dynamic collider's body in a frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Exchange {
+    /// Linear impulse on the body, `ΣJ_k` (N·s).
+    pub linear: Vector,
+    /// Angular impulse on the body about its centre, `ΣL_k` (N·m·s).
+    pub angular: Vector,
+    /// `ΣJ_k τ_k`, each impulse times when in the frame it came (N·s²).
+    pub linear_moment: Vector,
+    /// `ΣL_k τ_k` (N·m·s²).
+    pub angular_moment: Vector,
+    /// Particle contacts that exchanged an impulse.
+    pub contacts: u32,
+}
+
+impl Exchange {
+    /// How a rigid-body engine stepping the body over the frame `Δ` reproduces both the end
+    /// velocity and the end position the body had in the soft step: an impulse at the start
+    /// of its step and a constant force over it, linear and angular:
+    /// `(J_a, F, A_a, T)` with `J_a = ΣJ − 2ΣJτ/Δ`, `F = 2ΣJτ/Δ²` (then `J_a + FΔ = ΣJ` and
+    /// `J_a Δ + FΔ²/2 = Σ J (Δ − τ)`). Impulses spread evenly over the frame (resting
+    /// contact) give `J_a = 0`: a steady force, felt in every substep as gravity is.
+    pub fn split(&self, frame: Scalar) -> (Vector, Vector, Vector, Vector) {
+        let d = frame;
+        (
+            self.linear - self.linear_moment * (2.0 / d),
+            self.linear_moment * (2.0 / (d * d)),
+            self.angular - self.angular_moment * (2.0 / d),
+            self.angular_moment * (2.0 / (d * d)),
+        )
+    }
+}
+
+/// The collider's pose at one instant.
+struct Pose {
+    /// Its centre (the [`Spin::center`]) and that point's velocity.
+    center: Vector,
+    velocity: Vector,
+    /// Its angular velocity.
+    omega: Vector,
+    /// The shape's origin and orientation.
+    origin: Vector,
+    rotation: Rot3,
+    /// A half-space's outward normal at this orientation.
+    normal: Vector,
 }
 
 /// A collider ready for queries.
 pub struct Collider {
     /// The parry3d shape.
     pub shape: SharedShape,
-    /// Where its origin is over time.
+    /// Where its centre (the origin unless [`Spin::center`] says otherwise) is over time.
     pub motion: Motion,
-    /// Orientation.
+    /// Orientation (at [`Spin::t0`] when it turns).
     pub rotation: Rot3,
     /// Contact material.
     pub material: ContactMaterial,
+    /// How it turns (not at all by default).
+    pub spin: Spin,
+    /// The dynamic rigid body behind it, if the particles' impulses act back on one.
+    pub response: Option<Response>,
     fast: Fast,
 }
 
 impl Clone for Collider {
     fn clone(&self) -> Self {
-        Self::new(
+        let mut c = Self::new(
             self.shape.clone(),
             self.motion,
             self.rotation,
             self.material,
-        )
+        );
+        c.spin = self.spin;
+        c.response = self.response.clone();
+        c
     }
 }
 
@@ -158,12 +311,14 @@ impl std::fmt::Debug for Collider {
             .field("shape", &self.shape.shape_type())
             .field("motion", &self.motion)
             .field("material", &self.material)
+            .field("spin", &self.spin)
+            .field("response", &self.response)
             .finish()
     }
 }
 
 impl Collider {
-    /// A collider from any parry3d shape.
+    /// A collider from any parry3d shape, moving without turning.
     pub fn new(
         shape: SharedShape,
         motion: Motion,
@@ -173,7 +328,7 @@ impl Collider {
         let fast = if let Some(b) = shape.as_ball() {
             Fast::Sphere(b.radius as Scalar)
         } else if let Some(h) = shape.as_halfspace() {
-            Fast::Plane((rotation * h.normal).to_scalar())
+            Fast::Plane(h.normal.to_scalar())
         } else {
             Fast::General
         };
@@ -182,8 +337,22 @@ impl Collider {
             motion,
             rotation,
             material,
+            spin: Spin::default(),
+            response: None,
             fast,
         }
+    }
+
+    /// The same collider turning as `spin` says.
+    pub fn with_spin(mut self, spin: Spin) -> Self {
+        self.spin = spin;
+        self
+    }
+
+    /// The same collider as a dynamic body that the particles push back.
+    pub fn with_response(mut self, response: Response) -> Self {
+        self.response = Some(response);
+        self
     }
 
     /// From a layout description.
@@ -193,9 +362,53 @@ impl Collider {
         Self::new(d.shape.to_shared(), d.motion, rot, d.material)
     }
 
+    fn turns(&self) -> bool {
+        self.spin.angular_velocity != Vector::ZERO || self.spin.center != Vector::ZERO
+    }
+
+    /// The pose at time `t` (for a dynamic body, as the impulses received so far moved it).
+    fn pose(&self, t: Scalar) -> Pose {
+        let (mut center, mut velocity, _) = self.motion.eval(t);
+        let normal = |rotation: Rot3| match self.fast {
+            Fast::Plane(local) => (rotation * local.to_f32()).to_scalar(),
+            _ => Vector::ZERO,
+        };
+        let mut omega = self.spin.angular_velocity;
+        let mut turn = omega * (t - self.spin.t0);
+        if let Some(r) = &self.response {
+            let ex = r.exchange();
+            let tau = t - r.t0;
+            center +=
+                r.gravity * (0.5 * tau * tau) + (ex.linear * tau - ex.linear_moment) * r.inv_mass;
+            velocity += r.gravity * tau + ex.linear * r.inv_mass;
+            omega += r.inv_inertia_mul(ex.angular);
+            turn += r.inv_inertia_mul(ex.angular * tau - ex.angular_moment);
+        } else if !self.turns() {
+            return Pose {
+                center,
+                velocity,
+                omega: Vector::ZERO,
+                origin: center,
+                rotation: self.rotation,
+                normal: normal(self.rotation),
+            };
+        }
+        let rotation = (Rot3::from_scaled_axis(turn.to_f32()) * self.rotation).normalize();
+        let origin = center - (rotation * self.spin.center.to_f32()).to_scalar();
+        Pose {
+            center,
+            velocity,
+            omega,
+            origin,
+            rotation,
+            normal: normal(rotation),
+        }
+    }
+
     /// Where particle position `p` should be and the contact normal, when it is inside the
-    /// collider (centred at `c`) or closer to its surface than `thick`.
-    fn contact(&self, c: Vector, thick: Scalar, p: Vector) -> Option<(Vector, Vector)> {
+    /// collider (at `pose`) or closer to its surface than `thick`.
+    fn contact(&self, pose: &Pose, thick: Scalar, p: Vector) -> Option<(Vector, Vector)> {
+        let c = pose.origin;
         match self.fast {
             Fast::Sphere(r) => {
                 let d = p - c;
@@ -207,7 +420,8 @@ impl Collider {
                     None
                 }
             }
-            Fast::Plane(n) => {
+            Fast::Plane(_) => {
+                let n = pose.normal;
                 let s = (p - c).dot(n);
                 if s < thick {
                     Some((p + n * (thick - s), n))
@@ -216,7 +430,7 @@ impl Collider {
                 }
             }
             Fast::General => {
-                let pose = Pose3::from_parts(c.to_f32(), self.rotation);
+                let pose = Pose3::from_parts(c.to_f32(), pose.rotation);
                 let pf = p.to_f32();
                 let proj = self.shape.project_point(&pose, pf, true);
                 let d = pf - proj.point;
@@ -240,12 +454,23 @@ impl Collider {
         }
     }
 
+    /// Velocity of the collider's surface at `p` (at `pose`).
+    fn surface_velocity(pose: &Pose, p: Vector) -> Vector {
+        if pose.omega == Vector::ZERO {
+            pose.velocity
+        } else {
+            pose.velocity + pose.omega.cross(p - pose.center)
+        }
+    }
+
     /// Particles resting on or pressed into this collider at time `t`: touching (within the
     /// thickness plus `slack`), not moving away, and pushed into it by `f` (their total force).
     /// Implicit steps hold them still (Baraff & Witkin's constraint filter: sticking contact)
     /// instead of letting the step drive them in and projecting them out afterwards, which
     /// pumps energy into stiff elements. Marks them in `held` and sets their velocity to the
-    /// collider's.
+    /// collider's surface velocity. A collider with a [`Response`] holds nothing: the
+    /// constraint force of a held particle would never reach its body, so its contacts are
+    /// resolved after the step like an explicit method's, where the impulse is exchanged.
     #[allow(clippy::too_many_arguments)]
     pub fn hold(
         &self,
@@ -257,18 +482,21 @@ impl Collider {
         inv_mass: &[Scalar],
         held: &mut [bool],
     ) {
-        let (c, vc, _) = self.motion.eval(t);
+        if self.response.is_some() {
+            return;
+        }
+        let pose = self.pose(t);
         let thick = self.material.thickness as Scalar + slack;
         for i in 0..x.len() {
             if inv_mass[i] == 0.0 || held[i] {
                 continue;
             }
-            if let Some((_, n)) = self.contact(c, thick, x[i])
-                && (v[i] - vc).dot(n) <= 0.0
-                && f[i].dot(n) <= 0.0
-            {
-                held[i] = true;
-                v[i] = vc;
+            if let Some((_, n)) = self.contact(&pose, thick, x[i]) {
+                let vc = Self::surface_velocity(&pose, x[i]);
+                if (v[i] - vc).dot(n) <= 0.0 && f[i].dot(n) <= 0.0 {
+                    held[i] = true;
+                    v[i] = vc;
+                }
             }
         }
     }
@@ -283,7 +511,10 @@ impl Collider {
         v: &mut [Vector],
         inv_mass: &[Scalar],
     ) -> usize {
-        let (c, vc, _) = self.motion.eval(t);
+        if let Some(r) = &self.response {
+            return self.resolve_exchanging(r, t, x, v, inv_mass);
+        }
+        let pose = self.pose(t);
         let m = &self.material;
         let thick = m.thickness as Scalar;
         let mut contacts = 0;
@@ -291,19 +522,16 @@ impl Collider {
             if inv_mass[i] == 0.0 {
                 continue;
             }
-            let hit = self.contact(c, thick, x[i]);
+            let hit = self.contact(&pose, thick, x[i]);
             if let Some((target, n)) = hit {
                 contacts += 1;
                 x[i] = target;
+                let vc = Self::surface_velocity(&pose, target);
                 let rel = v[i] - vc;
                 let vn = rel.dot(n);
                 if vn < 0.0 {
                     let vt = rel - n * vn;
-                    let e = if -vn > m.bounce_threshold as Scalar {
-                        m.restitution as Scalar
-                    } else {
-                        0.0
-                    };
+                    let e = self.restitution_for(vn);
                     let dvn = -(1.0 + e) * vn;
                     let vt_len = vt.length();
                     let keep = if vt_len > 0.0 {
@@ -316,5 +544,122 @@ impl Collider {
             }
         }
         contacts
+    }
+
+    fn restitution_for(&self, vn: Scalar) -> Scalar {
+        let m = &self.material;
+        if -vn > m.bounce_threshold as Scalar {
+            m.restitution as Scalar
+        } else {
+            0.0
+        }
+    }
+
+    /// [`Collider::resolve`] against a dynamic body: sequential impulses with the pair's
+    /// effective mass, the body's velocity updated after each contact (Gauss–Seidel, in
+    /// particle order), the impulses summed into the [`Exchange`].
+    fn resolve_exchanging(
+        &self,
+        body: &Response,
+        t: Scalar,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        inv_mass: &[Scalar],
+    ) -> usize {
+        let pose = self.pose(t);
+        let m = &self.material;
+        let thick = m.thickness as Scalar;
+        let mu = m.friction as Scalar;
+        let tau = t - body.t0;
+        let mut ex = body.exchange.lock().unwrap_or_else(|e| e.into_inner());
+        // The body's velocity at this instant before this call's contacts.
+        let (v0, w0) = (pose.velocity, pose.omega);
+        let (j0, l0) = (ex.linear, ex.angular);
+        let mut contacts = 0;
+        for i in 0..x.len() {
+            let wp = inv_mass[i];
+            if wp == 0.0 {
+                continue;
+            }
+            let Some((target, n)) = self.contact(&pose, thick, x[i]) else {
+                continue;
+            };
+            contacts += 1;
+            x[i] = target;
+            // Gauss–Seidel: the contacts before this one in the sweep already pushed the body.
+            let vb = v0 + (ex.linear - j0) * body.inv_mass;
+            let wb = w0 + body.inv_inertia_mul(ex.angular - l0);
+            let r = target - pose.center;
+            let rel = v[i] - (vb + wb.cross(r));
+            let vn = rel.dot(n);
+            if vn >= 0.0 {
+                continue;
+            }
+            let e = self.restitution_for(vn);
+            let jn = -(1.0 + e) * vn / (wp + body.inverse_mass_along(r, n));
+            let vt = rel - n * vn;
+            let vt_len = vt.length();
+            let mut impulse = n * jn;
+            if vt_len > 0.0 && mu > 0.0 {
+                let tdir = vt / vt_len;
+                let jt = (mu * jn).min(vt_len / (wp + body.inverse_mass_along(r, tdir)));
+                impulse -= tdir * jt;
+            }
+            v[i] += impulse * wp;
+            let torque = r.cross(impulse);
+            ex.linear -= impulse;
+            ex.angular -= torque;
+            ex.linear_moment -= impulse * tau;
+            ex.angular_moment -= torque * tau;
+            ex.contacts += 1;
+        }
+        contacts
+    }
+}
+
+/// `shape` stretched by `scale` along its own axes (a transform's scale), or `None` for a
+/// shape or scale this cannot represent (a zero or non-finite factor, a compound shape). A
+/// ball, capsule, cylinder or cone under a non-uniform scale becomes a convex polyhedron of
+/// `subdivisions` segments around, as in avian; a half-space's normal is transformed by the
+/// inverse scale, which keeps the plane through the origin where the stretched plane is.
+pub fn scale_shape(
+    shape: &SharedShape,
+    scale: glam::Vec3,
+    subdivisions: u32,
+) -> Option<SharedShape> {
+    use parry3d::either::Either;
+    use parry3d::shape::TypedShape;
+    if !(scale.is_finite() && scale.abs().min_element() > 0.0) {
+        return None;
+    }
+    if scale == glam::Vec3::ONE {
+        return Some(shape.clone());
+    }
+    let s = scale.abs();
+    fn either<A, B>(e: Option<Either<A, B>>) -> Option<SharedShape>
+    where
+        A: parry3d::shape::Shape,
+        B: parry3d::shape::Shape,
+    {
+        e.map(|e| match e {
+            Either::Left(a) => SharedShape::new(a),
+            Either::Right(b) => SharedShape::new(b),
+        })
+    }
+    match shape.as_typed_shape() {
+        TypedShape::Ball(b) => either(b.scaled(s, subdivisions)),
+        TypedShape::Cuboid(c) => Some(SharedShape::new(c.scaled(s))),
+        TypedShape::Capsule(c) => either(c.scaled(s, subdivisions)),
+        TypedShape::Cylinder(c) => either(c.scaled(s, subdivisions)),
+        TypedShape::Cone(c) => either(c.scaled(s, subdivisions)),
+        TypedShape::HalfSpace(h) => (h.normal / scale)
+            .try_normalize()
+            .map(SharedShape::halfspace),
+        TypedShape::TriMesh(m) => Some(SharedShape::new(m.clone().scaled(scale))),
+        TypedShape::ConvexPolyhedron(c) => c.clone().scaled(scale).map(SharedShape::new),
+        TypedShape::HeightField(h) => Some(SharedShape::new(h.clone().scaled(scale))),
+        TypedShape::Triangle(t) => Some(SharedShape::new(t.scaled(scale))),
+        TypedShape::Segment(g) => Some(SharedShape::new(g.scaled(scale))),
+        _ => None,
     }
 }

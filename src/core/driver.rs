@@ -166,6 +166,44 @@ pub struct DriverConfig {
     pub solver: SolverChoice,
 }
 
+impl DriverConfig {
+    /// Checks the numbers a run needs (a positive step or CFL number and cap, a positive frame
+    /// length, guard and tolerances); the first problem as a sentence.
+    pub fn validate(&self) -> Result<(), String> {
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        match self.policy {
+            StepPolicy::Fixed { h } if !positive(h) => {
+                return Err(format!("step h = {h} must be a positive number"));
+            }
+            StepPolicy::Cfl { number, max, .. } if !(positive(number) && positive(max)) => {
+                return Err(format!(
+                    "CFL number {number} and cap {max} must be positive numbers"
+                ));
+            }
+            _ => {}
+        }
+        if !positive(self.frame_dt) {
+            return Err(format!(
+                "frame length {} must be a positive number",
+                self.frame_dt
+            ));
+        }
+        if let Some(g) = self.energy_guard
+            && !positive(g)
+        {
+            return Err(format!("energy guard {g} must be a positive number"));
+        }
+        let a = &self.adaptive;
+        if !(positive(a.rtol) && positive(a.atol) && positive(a.h_min) && positive(a.safety)) {
+            return Err(format!(
+                "adaptive tolerances (rtol {}, atol {}, h_min {}, safety {}) must be positive numbers",
+                a.rtol, a.atol, a.h_min, a.safety
+            ));
+        }
+        Ok(())
+    }
+}
+
 impl Default for DriverConfig {
     fn default() -> Self {
         Self {

@@ -10,6 +10,7 @@ pub mod forces;
 pub mod integrate;
 pub mod jacobian;
 pub mod kernels;
+pub mod layout;
 pub mod motion;
 pub mod ode;
 pub mod particles;

@@ -5,6 +5,9 @@
 use crate::core::collide::{Collider, ColliderDesc};
 use crate::core::fem::NeoHookean;
 use crate::core::forces::{SpringLaw, Wind};
+use crate::core::layout::{
+    Anchor, BodyLayout, LayoutItem, LayoutParticle, LayoutSpring, LayoutTet,
+};
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
@@ -197,10 +200,6 @@ impl fmt::Display for SceneError {
 
 impl std::error::Error for SceneError {}
 
-fn finite3(a: &[f64; 3]) -> bool {
-    a.iter().all(|x| x.is_finite())
-}
-
 /// Largest scene the builders and the reader accept (particles), so that a typo cannot ask
 /// for all the machine's memory.
 pub const MAX_PARTICLES: usize = 4_000_000;
@@ -248,142 +247,28 @@ impl Scene {
                 &format!("more than the limit of {MAX_SPRINGS} springs"),
             );
         }
-        if !finite3(&self.gravity) {
-            err("gravity".into(), "must be finite");
-        }
-        if !(self.drag.is_finite() && self.drag >= 0.0) {
-            err("drag".into(), "must be finite and non-negative");
-        }
-        let mut kinematic = vec![false; n];
         for (k, m) in self.motions.iter().enumerate() {
             if m.particle >= n {
                 err(format!("motions[{k}].particle"), "index out of range");
-            } else {
-                kinematic[m.particle] = true;
-            }
-            if !m.motion.is_finite() {
-                err(format!("motions[{k}].motion"), "must be finite");
             }
         }
-        for (i, p) in self.particles.iter().enumerate() {
-            if !finite3(&p.position) {
-                err(format!("particles[{i}].position"), "must be finite");
-            }
-            if !finite3(&p.velocity) {
-                err(format!("particles[{i}].velocity"), "must be finite");
-            }
-            let fixed = p.pinned || kinematic[i];
-            if !p.mass.is_finite() || p.mass < 0.0 || (p.mass == 0.0 && !fixed) {
-                err(
-                    format!("particles[{i}].mass"),
-                    if fixed {
-                        "must be finite and non-negative"
-                    } else {
-                        "must be positive and finite (or pin the particle)"
-                    },
-                );
-            }
-        }
-        for (k, s) in self.springs.iter().enumerate() {
-            if s.a >= n {
-                err(format!("springs[{k}].a"), "index out of range");
-            }
-            if s.b >= n {
-                err(format!("springs[{k}].b"), "index out of range");
-            }
-            if s.a == s.b {
-                err(
-                    format!("springs[{k}].b"),
-                    "a spring cannot join a particle to itself",
-                );
-            }
-            if !(s.stiffness.is_finite() && s.stiffness >= 0.0) {
-                err(
-                    format!("springs[{k}].stiffness"),
-                    "must be finite and non-negative",
-                );
-            }
-            if !(s.damping.is_finite() && s.damping >= 0.0) {
-                err(
-                    format!("springs[{k}].damping"),
-                    "must be finite and non-negative",
-                );
-            }
-            match s.rest_length {
-                Some(l) if !(l.is_finite() && l >= 0.0) => err(
-                    format!("springs[{k}].rest_length"),
-                    "must be finite and non-negative",
-                ),
-                Some(l) if l == 0.0 && s.law == SpringLaw::Strain => err(
-                    format!("springs[{k}].rest_length"),
-                    "a strain-law spring needs a positive rest length",
-                ),
-                None if s.law == SpringLaw::Strain && s.a < n && s.b < n && s.a != s.b => {
-                    let (pa, pb) = (self.particles[s.a].position, self.particles[s.b].position);
-                    let d2: f64 = (0..3).map(|c| (pa[c] - pb[c]).powi(2)).sum();
-                    if d2 == 0.0 {
-                        err(
-                            format!("springs[{k}].rest_length"),
-                            "a strain-law spring needs a positive rest length",
-                        );
+        // The body's own rules live in one place, shared with the plugin.
+        for e in self.layout().validate() {
+            let path = match e.item {
+                LayoutItem::Body => e.field.to_string(),
+                LayoutItem::Particle(i) if e.field == "motion" => {
+                    match self.motions.iter().rposition(|m| m.particle == i) {
+                        Some(k) => format!("motions[{k}].motion"),
+                        None => format!("particles[{i}]"),
                     }
                 }
-                _ => {}
-            }
-        }
-        if self.tets.len() > MAX_SPRINGS {
-            err(
-                "tets".into(),
-                &format!("more than the limit of {MAX_SPRINGS} tets"),
-            );
-        }
-        if let Some(Err(m)) = self.material.map(|m| m.validate()) {
-            err("material".into(), m);
-        }
-        for (k, t) in self.tets.iter().enumerate() {
-            if t.vertices.iter().any(|&i| i >= n) {
-                err(format!("tets[{k}].vertices"), "index out of range");
-                continue;
-            }
-            match t.material.or(self.material) {
-                None => err(
-                    format!("tets[{k}].material"),
-                    "no material: give the tet or the scene one",
-                ),
-                Some(m) => {
-                    if let (Err(e), Some(_)) = (m.validate(), t.material) {
-                        err(format!("tets[{k}].material"), e);
-                    }
-                }
-            }
-            let x = t
-                .vertices
-                .map(|i| glam::DVec3::from_array(self.particles[i].position));
-            let mut shape = crate::core::fem::Tets::new();
-            if let Err(e) = shape.push(t.vertices, x, &NeoHookean::default()) {
-                err(format!("tets[{k}]"), &e.to_string());
-            }
-        }
-        for (k, f) in self.forces.iter().enumerate() {
-            if f.particle >= n {
-                err(format!("forces[{k}].particle"), "index out of range");
-            }
-            if !finite3(&f.force) {
-                err(format!("forces[{k}].force"), "must be finite");
-            }
-        }
-        let wind_ok = |w: &Wind| {
-            finite3(&w.velocity)
-                && w.gust.is_finite()
-                && w.frequency.is_finite()
-                && w.coefficient.is_finite()
-                && w.coefficient >= 0.0
-        };
-        if self.wind.as_ref().is_some_and(|w| !wind_ok(w)) {
-            err(
-                "wind".into(),
-                "numbers must be finite and the coefficient non-negative",
-            );
+                LayoutItem::Particle(i) => format!("particles[{i}].{}", e.field),
+                LayoutItem::Spring(k) => format!("springs[{k}].{}", e.field),
+                LayoutItem::Tet(k) if e.field.is_empty() => format!("tets[{k}]"),
+                LayoutItem::Tet(k) => format!("tets[{k}].{}", e.field),
+                LayoutItem::Force(k) => format!("forces[{k}].{}", e.field),
+            };
+            err(path, &e.message);
         }
         for (k, c) in self.colliders.iter().enumerate() {
             if !c.shape.is_valid() {
@@ -444,18 +329,76 @@ impl Scene {
         })
     }
 
-    /// The initial state.
+    /// The scene's body as a [`BodyLayout`] (motions with an out-of-range particle are left
+    /// out: [`Scene::validate`] reports them). A particle with a motion is moved by it, pinned
+    /// or not.
+    pub fn layout(&self) -> BodyLayout {
+        let mut particles: Vec<LayoutParticle> = self
+            .particles
+            .iter()
+            .map(|p| LayoutParticle {
+                position: p.position,
+                velocity: p.velocity,
+                mass: p.mass,
+                anchor: if p.pinned {
+                    Anchor::Pinned
+                } else {
+                    Anchor::Free
+                },
+            })
+            .collect();
+        for m in &self.motions {
+            if let Some(p) = particles.get_mut(m.particle) {
+                p.anchor = Anchor::Moving(m.motion);
+            }
+        }
+        BodyLayout {
+            particles,
+            springs: self
+                .springs
+                .iter()
+                .map(|s| LayoutSpring {
+                    a: s.a,
+                    b: s.b,
+                    rest_length: s.rest_length,
+                    stiffness: s.stiffness,
+                    damping: s.damping,
+                    law: s.law,
+                })
+                .collect(),
+            tets: self
+                .tets
+                .iter()
+                .map(|t| LayoutTet {
+                    vertices: t.vertices,
+                    rest: None,
+                    material: t.material,
+                })
+                .collect(),
+            material: self.material,
+            forces: self.forces.iter().map(|f| (f.particle, f.force)).collect(),
+            gravity: self.gravity,
+            drag: self.drag,
+            wind: self.wind,
+        }
+    }
+
+    /// The initial state, as [`Scene::build`] makes it (pinned particles at rest).
     pub fn initial_state(&self) -> ParticleState {
+        let layout = self.layout();
         ParticleState {
-            x: self
+            x: layout
                 .particles
                 .iter()
                 .map(|p| p.position.to_scalar())
                 .collect(),
-            v: self
+            v: layout
                 .particles
                 .iter()
-                .map(|p| if p.pinned { [0.0; 3] } else { p.velocity })
+                .map(|p| match p.anchor {
+                    Anchor::Pinned => [0.0; 3],
+                    _ => p.velocity,
+                })
                 .map(ToScalar::to_scalar)
                 .collect(),
         }
@@ -478,51 +421,20 @@ impl Scene {
         self
     }
 
-    /// Validates and builds the model and its initial state.
+    /// Validates and builds the model and its initial state, through the same
+    /// [`BodyLayout::build`] the plugin uses; then adds the scene's colliders.
     pub fn build(&self) -> Result<(ParticleModel, ParticleState), SceneError> {
         self.validate()?;
-        let state = self.initial_state();
-        let mut model =
-            ParticleModel::new(self.particles.iter().map(|p| p.mass.to_scalar()).collect());
-        for (i, p) in self.particles.iter().enumerate() {
-            if p.pinned {
-                model.pin(i, p.position.to_scalar());
-            }
-        }
-        for m in &self.motions {
-            model.prescribe(m.particle, m.motion);
-        }
-        for (k, s) in self.springs.iter().enumerate() {
-            model.springs.push(
-                s.a,
-                s.b,
-                self.rest_length(k).to_scalar(),
-                s.stiffness.to_scalar(),
-                s.damping.to_scalar(),
-                s.law,
-            );
-        }
-        for t in &self.tets {
-            let x = t
-                .vertices
-                .map(|i| glam::DVec3::from_array(self.particles[i].position));
-            let m = t.material.or(self.material).unwrap_or_default();
-            // Validated above: cannot fail.
-            let _ = model.tets.push(t.vertices, x, &m);
-        }
-        model.gravity = self.gravity.to_scalar();
-        model.drag = self.drag.to_scalar();
-        model.set_wind(self.wind);
-        for f in &self.forces {
-            model.set_external_force(f.particle, f.force.to_scalar());
-        }
-        model.colliders = self.colliders.iter().map(Collider::from_desc).collect();
-        model.validate().map_err(|e| SceneError {
-            errors: vec![FieldError {
-                path: "model".into(),
-                message: e.to_string(),
-            }],
+        let (mut model, state) = self.layout().build().map_err(|errs| SceneError {
+            errors: errs
+                .into_iter()
+                .map(|e| FieldError {
+                    path: "model".into(),
+                    message: e.to_string(),
+                })
+                .collect(),
         })?;
+        model.colliders = self.colliders.iter().map(Collider::from_desc).collect();
         Ok((model, state))
     }
 }

@@ -17,7 +17,7 @@ mod motion;
 mod rebuild;
 mod step;
 use motion::scripted_motion;
-use rebuild::prepare;
+pub(crate) use rebuild::prepare;
 use step::{reset, step, tick, writeback};
 
 /// Soft-body physics. Runs in `FixedUpdate` by default ([`SoftBodyPlugin::new`] picks another
@@ -209,7 +209,7 @@ impl Plugin for SoftBodyPlugin {
             .add_systems(
                 self.schedule,
                 (
-                    (reset, scripted_motion, prepare)
+                    (reset, scripted_motion, motion::scale_colliders, prepare)
                         .chain()
                         .in_set(SoftBodySystems::Prepare),
                     step.in_set(SoftBodySystems::Step),
@@ -237,7 +237,7 @@ pub struct BodySim {
     /// Positions and velocities as last written to the components (to tell user edits apart).
     written: Vec<(Vec3, Vec3)>,
     /// Particles following a target: index, target, offset, target's last position.
-    follow: Vec<(u32, Entity, Vec3, Vec3)>,
+    pub(crate) follow: Vec<(u32, Entity, Vec3, Vec3)>,
     /// Pinned-in-place particle indices (editing their position moves the pin).
     fixed_pins: Vec<u32>,
     problem: Option<String>,
@@ -262,15 +262,23 @@ impl BodySim {
         &self.particles
     }
 
+    /// Length of the fixed frame the body was built for (s).
+    #[cfg_attr(not(feature = "avian"), allow(dead_code))]
+    pub(crate) fn frame_dt(&self) -> f64 {
+        self.frame_dt
+    }
+
     /// The packed index of a particle entity of this body.
     pub fn index_of(&self, particle: Entity) -> Option<usize> {
         self.index.get(&particle).map(|i| *i as usize)
     }
 }
 
-/// A collider's pose at the previous fixed step (internal: its velocity comes from the
-/// change).
+/// A collider's pose at the previous fixed step (internal: its linear and angular velocity
+/// come from the change) and its shape at its transform's scale.
 #[derive(Component, Default)]
 pub struct ColliderTrack {
     prev: Option<(Vec3, Quat)>,
+    /// The shape scaled by this scale (absent: scale one, or a shape that cannot be scaled).
+    scaled: Option<(Vec3, crate::core::collide::SharedShape)>,
 }

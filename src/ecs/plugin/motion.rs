@@ -2,8 +2,9 @@
 //! particles following their pin targets, colliders' paths.
 
 use super::*;
-use crate::core::collide::{Collider, ContactMaterial};
+use crate::core::collide::{Collider, ContactMaterial, Spin, scale_shape};
 use crate::core::motion::Motion;
+use crate::math::Vector;
 
 type ScriptedItem<'a> = (
     &'a ScriptedMotion,
@@ -64,8 +65,42 @@ pub(super) fn update_follow(bs: &mut BodySim, targets: &Query<&GlobalTransform>)
     }
 }
 
+/// Keeps each collider's shape scaled by its transform's scale (rescaled only when the scale
+/// or the shape changes: a triangle mesh costs a copy).
+pub(super) fn scale_colliders(
+    mut colliders: Query<(
+        Entity,
+        Ref<SoftBodyCollider>,
+        &GlobalTransform,
+        &mut ColliderTrack,
+    )>,
+) {
+    for (e, c, gt, mut track) in &mut colliders {
+        let scale = gt.to_scale_rotation_translation().0;
+        let current = track.scaled.as_ref().map_or(Vec3::ONE, |s| s.0);
+        if scale == current && !c.is_changed() {
+            continue;
+        }
+        track.scaled = if scale == Vec3::ONE {
+            None
+        } else {
+            match scale_shape(&c.shape.0, scale, 16) {
+                Some(shape) => Some((scale, shape)),
+                None => {
+                    warn!(
+                        "collider {e}: its shape cannot take the scale {scale}; the unscaled shape is used"
+                    );
+                    None
+                }
+            }
+        };
+    }
+}
+
 /// Colliders, as this body sees them over the coming frame: each moves linearly from its last
-/// pose to its current one (its velocity is the transform's change over the fixed step).
+/// pose to its current one, and turns at the constant angular velocity that takes its last
+/// orientation to its current one (both velocities are the transform's change over the fixed
+/// step), with the shape at the transform's scale.
 pub(super) fn update_colliders(
     bs: &mut BodySim,
     colliders: &Query<(&SoftBodyCollider, &GlobalTransform, &ColliderTrack)>,
@@ -76,18 +111,33 @@ pub(super) fn update_colliders(
         let t0 = sim.time;
         for (c, gt, track) in colliders {
             let (_, rot, pos) = gt.to_scale_rotation_translation();
-            let from = track.prev.map_or(pos, |p| p.0);
-            sim.system.colliders.push(Collider::new(
-                c.shape.0.clone(),
-                linear(from, pos, t0, frame_dt),
-                rot,
-                ContactMaterial {
-                    friction: c.friction as f64,
-                    restitution: c.restitution as f64,
-                    thickness: c.thickness as f64,
-                    bounce_threshold: c.bounce_threshold as f64,
-                },
-            ));
+            let (from, from_rot) = track.prev.unwrap_or((pos, rot));
+            let shape = track
+                .scaled
+                .as_ref()
+                .map_or_else(|| c.shape.0.clone(), |s| s.1.clone());
+            let material = ContactMaterial {
+                friction: c.friction as f64,
+                restitution: c.restitution as f64,
+                thickness: c.thickness as f64,
+                bounce_threshold: c.bounce_threshold as f64,
+            };
+            let mut collider = Collider::new(shape, linear(from, pos, t0, frame_dt), rot, material);
+            // The shortest turn from the last orientation to this one, spread over the step.
+            let mut turn = rot * from_rot.inverse();
+            if turn.w < 0.0 {
+                turn = -turn;
+            }
+            let axis_angle = turn.to_scaled_axis();
+            if axis_angle != Vec3::ZERO && axis_angle.is_finite() {
+                collider.rotation = from_rot;
+                collider = collider.with_spin(Spin {
+                    angular_velocity: (axis_angle / frame_dt as f32).to_scalar(),
+                    t0,
+                    center: Vector::ZERO,
+                });
+            }
+            sim.system.colliders.push(collider);
         }
     }
 }

@@ -4,8 +4,10 @@
 
 use super::motion::{update_colliders, update_follow, v3};
 use super::*;
-use crate::core::driver::{DriverConfig, StepPolicy};
-use crate::core::particles::ModelError;
+use crate::core::driver::DriverConfig;
+use crate::core::layout::{
+    Anchor, BodyLayout, LayoutItem, LayoutParticle, LayoutSpring, LayoutTet,
+};
 
 type ParticleItem<'a> = (
     Ref<'a, Particle>,
@@ -62,52 +64,53 @@ fn build_body(
     if ents.is_empty() {
         return Err(format!("soft body {body_e} has no particles"));
     }
-    let mut state = ParticleState::zeros(ents.len());
-    let mut masses = Vec::with_capacity(ents.len());
-    for (i, &e) in ents.iter().enumerate() {
-        let (p, _, _) = particles.get(e).expect("checked above");
-        if !p.position.is_finite() || !p.velocity.is_finite() {
-            return Err(format!(
-                "particle {e}: position {} or velocity {} is not finite",
-                p.position, p.velocity
-            ));
-        }
-        state.x[i] = p.position.to_scalar();
-        state.v[i] = p.velocity.to_scalar();
-        masses.push(p.mass as Scalar);
-    }
-    let mut model = ParticleModel::new(masses);
+    // The body as a core layout: the same `BodyLayout::build` the core driver's scenes go
+    // through, so the plugin steps exactly the model `Scene::build` would make.
+    let mut layout = BodyLayout {
+        gravity: body
+            .gravity
+            .unwrap_or(Vec3::new(0.0, -9.81, 0.0))
+            .to_array()
+            .map(f64::from),
+        drag: body.drag as f64,
+        wind: wind.map(Into::into),
+        material: fem.material,
+        ..Default::default()
+    };
     let (mut follow, mut fixed_pins) = (vec![], vec![]);
     for (i, &e) in ents.iter().enumerate() {
         let (p, pin, force) = particles.get(e).expect("checked above");
+        let mut particle = LayoutParticle {
+            position: p.position.to_array().map(f64::from),
+            velocity: p.velocity.to_array().map(f64::from),
+            mass: p.mass as f64,
+            anchor: Anchor::Free,
+        };
         if let Some(pin) = pin {
-            match pin.target {
+            match pin.target.map(|t| (t, targets.get(t))) {
                 None => {
-                    model.pin(i, state.x[i]);
+                    particle.anchor = Anchor::Pinned;
                     fixed_pins.push(i as u32);
                 }
-                Some(t) => match targets.get(t) {
-                    Ok(gt) => {
-                        let at = gt.transform_point(pin.offset);
-                        model.prescribe(i, Motion::Fixed { position: v3(at) });
-                        state.x[i] = at.to_scalar();
-                        follow.push((i as u32, t, pin.offset, at));
-                    }
-                    Err(_) => {
-                        warn!(
-                            "particle {e}: pin target {t} has no GlobalTransform; pinned in place"
-                        );
-                        model.pin(i, p.position.to_scalar());
-                        fixed_pins.push(i as u32);
-                    }
-                },
+                Some((t, Ok(gt))) => {
+                    let at = gt.transform_point(pin.offset);
+                    particle.anchor = Anchor::Moving(Motion::Fixed { position: v3(at) });
+                    particle.position = at.to_array().map(f64::from);
+                    follow.push((i as u32, t, pin.offset, at));
+                }
+                Some((t, Err(_))) => {
+                    warn!("particle {e}: pin target {t} has no GlobalTransform; pinned in place");
+                    particle.anchor = Anchor::Pinned;
+                    fixed_pins.push(i as u32);
+                }
             }
         }
+        layout.particles.push(particle);
         if let Some(f) = force {
-            model.set_external_force(i, f.0.to_scalar());
+            layout.forces.push((i, f.0.to_array().map(f64::from)));
         }
     }
-    // The entity behind each packed spring, to name it in errors.
+    // The entity behind each packed spring and tet, to name it in errors.
     let mut packed_springs = Vec::with_capacity(spring_list.len());
     for &se in spring_list {
         let Ok(s) = springs.get(se) else {
@@ -119,14 +122,14 @@ fn build_body(
                 s.a
             ),
             (Some(&a), Some(&b)) => {
-                model.springs.push(
-                    a as usize,
-                    b as usize,
-                    s.rest_length as Scalar,
-                    s.stiffness as Scalar,
-                    s.damping as Scalar,
-                    s.law,
-                );
+                layout.springs.push(LayoutSpring {
+                    a: a as usize,
+                    b: b as usize,
+                    rest_length: Some(s.rest_length as f64),
+                    stiffness: s.stiffness as f64,
+                    damping: s.damping as f64,
+                    law: s.law,
+                });
                 packed_springs.push(se);
             }
             _ => warn!(
@@ -135,6 +138,7 @@ fn build_body(
             ),
         }
     }
+    let mut packed_tets = Vec::with_capacity(fem.list.len());
     for &te in fem.list {
         let Ok(t) = fem.tets.get(te) else {
             continue;
@@ -148,61 +152,43 @@ fn build_body(
             );
             continue;
         };
-        let material = match t.material.or(fem.material) {
-            Some(m) => m,
-            None => {
-                return Err(format!(
-                    "tet {te}: no material (give the tet one, or the body an ElasticMaterial)"
-                ));
-            }
-        };
-        let rest = t
-            .rest
-            .map(|p| glam::DVec3::new(p.x as f64, p.y as f64, p.z as f64));
-        if let Err(e) = model.tets.push(v, rest, &material) {
-            return Err(format!("tet {te}: {e}"));
-        }
-    }
-    model.gravity = (body.gravity.unwrap_or(Vec3::new(0.0, -9.81, 0.0))).to_scalar();
-    model.drag = body.drag as Scalar;
-    model.set_wind(wind.map(Into::into));
-    if let Err(e) = model.validate() {
-        // Name the entity behind the packed index.
-        let spring_entity = |k: usize| packed_springs.get(k).copied();
-        return Err(match e {
-            ModelError::BadMass { particle, mass } => format!(
-                "particle {}: mass {mass} must be positive and finite unless the particle is pinned",
-                ents[particle]
-            ),
-            ModelError::BadSpring { spring, reason } => match spring_entity(spring) {
-                Some(se) => format!("spring {se}: {reason}"),
-                None => format!("soft body {body_e}: spring {spring}: {reason}"),
-            },
-            other => format!("soft body {body_e}: {other}"),
+        layout.tets.push(LayoutTet {
+            vertices: v,
+            rest: Some(t.rest.map(|p| p.as_dvec3())),
+            material: t.material,
         });
+        packed_tets.push(te);
     }
-    match body.step {
-        StepPolicy::Fixed { h } if !(h.is_finite() && h > 0.0) => {
-            return Err(format!(
-                "soft body {body_e}: step h = {h} must be a positive number"
-            ));
+    let (model, state) = layout.build().map_err(|errs| {
+        // The first problem, named by the entity behind the packed index.
+        let e = &errs[0];
+        let what = match e.item {
+            LayoutItem::Particle(i) => format!("particle {}", ents[i]),
+            LayoutItem::Spring(k) => format!("spring {}", packed_springs[k]),
+            LayoutItem::Tet(k) => format!("tet {}", packed_tets[k]),
+            LayoutItem::Force(k) => format!("particle {}", ents[layout.forces[k].0]),
+            LayoutItem::Body => format!("soft body {body_e}"),
+        };
+        let field = match (e.item, e.field) {
+            (LayoutItem::Tet(_), "material") if fem.material.is_none() => {
+                return format!(
+                    "{what}: no material (give the tet one, or the body an ElasticMaterial)"
+                );
+            }
+            (LayoutItem::Force(_), _) => "external force",
+            (_, "") => "",
+            (_, f) => f,
+        };
+        let more = match errs.len() {
+            1 => String::new(),
+            n => format!(" (and {} more problems)", n - 1),
+        };
+        if field.is_empty() {
+            format!("{what}: {}{more}", e.message)
+        } else {
+            format!("{what}: {field} {}{more}", e.message)
         }
-        StepPolicy::Cfl { number, max, .. }
-            if !(number.is_finite() && number > 0.0 && max.is_finite() && max > 0.0) =>
-        {
-            return Err(format!(
-                "soft body {body_e}: CFL number {number} and cap {max} must be positive numbers"
-            ));
-        }
-        _ => {}
-    }
-    if let Some(g) = body.energy_guard
-        && !(g.is_finite() && g > 0.0)
-    {
-        return Err(format!(
-            "soft body {body_e}: energy guard {g} must be a positive number"
-        ));
-    }
+    })?;
     let config = DriverConfig {
         integrator: body.integrator,
         policy: body.step,
@@ -211,6 +197,9 @@ fn build_body(
         solver: fem.solver,
         ..Default::default()
     };
+    config
+        .validate()
+        .map_err(|e| format!("soft body {body_e}: {e}"))?;
     Ok(Built {
         sim: Simulation::new(model, state, config),
         particles: ents,
@@ -221,7 +210,7 @@ fn build_body(
 }
 
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-pub(super) fn prepare(
+pub(crate) fn prepare(
     fixed: Res<Time<Fixed>>,
     global_wind: Res<GlobalWind>,
     mut bodies: Query<(
