@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Checks a cloth_sphere screenshot: the cloth and the sphere must both be visible.
-With `--cape`, checks the gltf_cape screenshot (see `cape` below).
+With `--cape`, checks the gltf_cape screenshot (see `cape` below); with `--playground`, the
+avian_playground screenshot (see `playground`).
 With `--body`, checks a finite-element screenshot (fem_bunny, fem_armadillo) instead: the
 skinned display mesh's beige (sRGB 0.78, 0.72, 0.62), lit — red ≥ green ≥ blue, red 12–70
 above blue, red > 120 — must cover more than 3 % of the frame right of the panel (10.9 % in
@@ -114,7 +115,37 @@ def cape(path):
     return 0
 
 
+def playground(path):
+    """avian_playground at t = 4.5 s: the soft bodies' red (the default surface, sRGB 0.85,
+    0.25, 0.22) must cover more than 3 % of the frame between the two panels (x 350–960), and
+    the crate (sRGB 0.6, 0.45, 0.25: red > green > blue, red 50–130 above blue) must be there
+    and resting on the trampoline, not on the ground 0.8 m below: more than 0.3 % of those
+    pixels, their mean height above 58 % of the frame's (the trampoline is drawn about half
+    way down, the ground under it about two thirds). docs/avian_playground.png: 7.4 % red,
+    0.8 % crate at 51 %."""
+    w, h, bpp, rows = read_png(path)
+    red = krate = krate_y = total = 0
+    for y, line in enumerate(rows):
+        for x in range(350, min(960, w)):
+            r, g, b = line[x * bpp], line[x * bpp + 1], line[x * bpp + 2]
+            total += 1
+            if r > 90 and r > 1.6 * g and r > 1.6 * b:
+                red += 1
+            elif r > 80 and r > g > b and 50 <= r - b <= 130 and g - b > 15:
+                krate += 1
+                krate_y += y
+    mean = krate_y / max(krate, 1) / h
+    print(f"{path}: {w}x{h}, soft bodies {100 * red / total:.2f} %, crate {100 * krate / total:.2f} % "
+          f"at {100 * mean:.0f} % of the height")
+    if red <= 0.03 * total or krate <= 0.003 * total or mean > 0.58:
+        print("FAIL: soft bodies need > 3 %, the crate > 0.3 % above 58 % of the height")
+        return 1
+    return 0
+
+
 if __name__ == "__main__":
+    if sys.argv[1] == "--playground":
+        sys.exit(playground(sys.argv[2]))
     if sys.argv[1] == "--body":
         sys.exit(body(sys.argv[2]))
     if sys.argv[1] == "--cape":

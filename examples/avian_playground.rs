@@ -7,8 +7,9 @@
 //! `-- --bench [FRAMES]`: headless, prints ms per fixed frame for the coupled scene, the soft
 //! bodies alone and the rigid bodies alone (the table in docs/BENCHMARKS.md).
 //!
-//! Keys: Space pause, N step, R reset, G wireframe; left drag pulls cloth, right drag or
-//! arrows orbit, wheel zoom.
+//! Keys: O throws a ball at the curtain, C drops a crate on the trampoline, Space pause, N step,
+//! G wireframe; left drag pulls cloth, right drag or arrows orbit, wheel zoom. The "coupling"
+//! panel lists what the soft bodies gave each rigid body in the last frame and the momenta.
 
 #[path = "common/mod.rs"]
 mod common;
@@ -47,14 +48,15 @@ fn main() {
                   mut materials: ResMut<Assets<StandardMaterial>>| {
                 common::stage(&mut c, Vec3::new(0.0, 0.8, 0.0), 7.5);
                 let mut looks = Looks {
-                    meshes: &mut *meshes,
-                    materials: &mut *materials,
+                    meshes: &mut meshes,
+                    materials: &mut materials,
                 };
                 spawn_world(&mut c, Some(&mut looks), &body, Part::Both);
             },
         )
         .add_systems(FixedUpdate, throw_balls)
-        .add_systems(Update, attach);
+        .add_systems(Update, (attach, keys))
+        .add_systems(bevy_egui::EguiPrimaryContextPass, coupling_panel);
     app.run();
 }
 
@@ -424,4 +426,95 @@ fn bench(frames: usize) {
         let ms = start.elapsed().as_secs_f64() * 1e3 / frames as f64;
         println!("| {name} | {frames} | {ms:.3} |");
     }
+}
+
+/// O: a ball at the curtain; C: a crate over the trampoline (the panel's integrator keys
+/// keep their letters).
+fn keys(
+    input: Res<ButtonInput<KeyCode>>,
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut count: Local<u32>,
+) {
+    // A little spread so that repeated drops do not stack exactly.
+    let jitter = |k: u32| ((k * 7919 % 13) as f32 / 13.0 - 0.5) * 0.4;
+    if input.just_pressed(KeyCode::KeyO) {
+        *count += 1;
+        commands.spawn((
+            Name::new("thrown ball"),
+            RigidBody::Dynamic,
+            Collider::sphere(0.12),
+            Mass(0.6),
+            Restitution::new(0.3),
+            Transform::from_xyz(-2.5 + jitter(*count), 1.3, 3.0),
+            LinearVelocity(Vec3::new(0.0, 1.5, -7.0)),
+            Mesh3d(meshes.add(Sphere::new(0.12))),
+            MeshMaterial3d(materials.add(Color::srgb(0.9, 0.35, 0.2))),
+        ));
+    }
+    if input.just_pressed(KeyCode::KeyC) {
+        *count += 1;
+        commands.spawn((
+            Name::new("crate"),
+            RigidBody::Dynamic,
+            Collider::cuboid(0.3, 0.3, 0.3),
+            Mass(4.0),
+            Friction::new(0.5),
+            Transform::from_xyz(0.3 + jitter(*count), 2.2, jitter(*count + 5))
+                .with_rotation(Quat::from_rotation_y(jitter(*count) * 3.0)),
+            Mesh3d(meshes.add(Cuboid::new(0.3, 0.3, 0.3))),
+            MeshMaterial3d(materials.add(Color::srgb(0.55, 0.4, 0.22))),
+        ));
+    }
+}
+
+/// What the soft bodies gave each rigid body last frame, and the momenta of the coupled
+/// bodies: the rigid bodies touched, the soft bodies, and their sum.
+fn coupling_panel(
+    mut contexts: bevy_egui::EguiContexts,
+    rigid: Query<(
+        Entity,
+        Option<&Name>,
+        &SoftBodyImpulse,
+        &ComputedMass,
+        &LinearVelocity,
+    )>,
+    particles: Query<&Particle>,
+) -> Result {
+    use bevy_egui::egui;
+    let ctx = contexts.ctx_mut()?;
+    let mut p_rigid = Vec3::ZERO;
+    egui::Window::new("coupling")
+        .anchor(egui::Align2::RIGHT_TOP, [-8.0, 8.0])
+        .default_width(300.0)
+        .show(ctx, |ui| {
+            egui::Grid::new("impulses").striped(true).show(ui, |ui| {
+                ui.label("rigid body");
+                ui.label("impulse (N·s)");
+                ui.label("contacts");
+                ui.end_row();
+                for (e, name, imp, mass, v) in &rigid {
+                    if imp.contacts == 0 && imp.linear == Vec3::ZERO {
+                        continue;
+                    }
+                    p_rigid += v.0 * mass.value();
+                    ui.label(name.map_or(format!("{e}"), |n| n.to_string()));
+                    ui.label(format!(
+                        "{:+.3} {:+.3} {:+.3}",
+                        imp.linear.x, imp.linear.y, imp.linear.z
+                    ));
+                    ui.label(format!("{}", imp.contacts));
+                    ui.end_row();
+                }
+            });
+            let p_soft: Vec3 = particles.iter().map(|p| p.velocity * p.mass).sum();
+            ui.separator();
+            ui.label(format!(
+                "momentum of the rigid bodies touched: {p_rigid:.3} kg·m/s"
+            ));
+            ui.label(format!("momentum of the soft bodies: {p_soft:.3} kg·m/s"));
+            ui.label(format!("sum: {:.3} kg·m/s", p_rigid + p_soft));
+        });
+    Ok(())
 }

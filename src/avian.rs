@@ -50,7 +50,9 @@
 //! [`Restitution`] coefficient, looked up on the collider, then its body, then avian's
 //! defaults; the contact thickness and bounce threshold are [`SoftBodyAvianSettings`]'s.
 
-use crate::core::collide::{Collider as SoftCollider, ContactMaterial, Exchange, Response, Spin};
+use crate::core::collide::{
+    Collider as SoftCollider, ContactMaterial, Exchange, Response, Spin, reach_bounds,
+};
 use crate::core::jacobian::Linearization;
 use crate::core::motion::Motion;
 use crate::ecs::SoftBody;
@@ -298,16 +300,16 @@ fn gather_colliders(
         let Some(sim) = bs.sim.as_mut() else { continue };
         entry.first = sim.system.colliders.len();
         let layers = layers.copied().unwrap_or_default();
-        // The body's box, grown by the distance its fastest particle can go in the frame.
-        let (mut lo, mut hi, mut vmax) = (Vec3::INFINITY, Vec3::NEG_INFINITY, 0.0f32);
-        for (x, v) in sim.state.x.iter().zip(&sim.state.v) {
-            let x = x.to_f32();
-            lo = lo.min(x);
-            hi = hi.max(x);
-            vmax = vmax.max(v.to_f32().length());
-        }
-        let grow = vmax * dt + settings.thickness;
-        let (lo, hi) = (lo - grow, hi + grow);
+        // The box the body's particles can reach in the frame.
+        let Some((lo, hi)) = reach_bounds(
+            &sim.state.x,
+            &sim.state.v,
+            dt as Scalar,
+            settings.thickness as Scalar + sim.system.gravity.length() * (dt * dt) as Scalar,
+        ) else {
+            continue;
+        };
+        let (lo, hi) = (lo.to_f32(), hi.to_f32());
         let t0 = sim.time;
         for (e, collider, pos, rot, of, c_layers, aabb, (c_friction, c_restitution)) in &colliders {
             if !layers.interacts_with(c_layers.copied().unwrap_or_default()) || unplaced(pos, rot) {
@@ -506,8 +508,8 @@ fn apply_to_rigid_bodies(
             f.apply_torque(torque);
         }
         let value = SoftBodyImpulse {
-            linear: j,
-            angular: l,
+            linear: j + force * frame,
+            angular: l + (moment - com.cross(force)) * frame,
             contacts,
         };
         match record {

@@ -582,3 +582,57 @@ fn a_coupled_scene_is_bitwise_deterministic() {
     let b = run();
     assert_eq!(a, b);
 }
+
+/// The other mass regime: a light ball (50 g, radius 0.15 m) dropped on a heavy jelly
+/// (216 particles of 50 g: 10.8 kg) standing on avian's ground. It lands and comes to rest on
+/// the top face, without sinking in or blowing up.
+#[test]
+fn a_light_ball_rests_on_a_heavy_jelly() {
+    let mut app = app();
+    app.world_mut().spawn((
+        RigidBody::Static,
+        Collider::half_space(Vec3::Y),
+        Transform::default(),
+    ));
+    let mut scene = build::jelly(&build::JellyParams {
+        size: [6, 6, 6],
+        spacing: 0.1,
+        mass: 0.05,
+        stiffness: [400.0, 200.0, 100.0],
+        damping: 0.2,
+        drop_height: 0.0,
+        ..Default::default()
+    })
+    .unwrap();
+    scene.colliders.clear();
+    let jelly = spawn(&mut app, &scene, explicit(1.0 / 1200.0));
+    let ball = app
+        .world_mut()
+        .spawn((
+            RigidBody::Dynamic,
+            Collider::sphere(0.15),
+            Mass(0.05),
+            Transform::from_xyz(0.0, 1.0, 0.0),
+        ))
+        .id();
+    let mut lowest = f32::MAX;
+    for _ in 0..(3.0 * HZ) as usize {
+        app.update();
+        lowest = lowest.min(app.world().get::<Position>(ball).unwrap().0.y);
+    }
+    running(&app, jelly);
+    let top = particles(&app, jelly)
+        .iter()
+        .map(|p| p.position.y)
+        .fold(f32::MIN, f32::max);
+    let y = app.world().get::<Position>(ball).unwrap().0.y;
+    let v = app.world().get::<LinearVelocity>(ball).unwrap().0;
+    println!("jelly top {top}; ball at {y} (lowest {lowest}), v {v}");
+    // Resting on the top particles: centre one radius (plus the contact thickness) above them.
+    assert!((y - (top + 0.15)).abs() < 0.03, "ball {y} vs top {top}");
+    assert!(
+        lowest > top - 0.05,
+        "the ball went into the jelly: {lowest}"
+    );
+    assert!(v.length() < 0.02, "at rest: {v}");
+}

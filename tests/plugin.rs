@@ -712,3 +712,38 @@ fn the_plugin_runs_in_another_schedule() {
     }
     assert_eq!(frames(&app, e), 7);
 }
+
+/// A plain collider takes its transform's scale: a ball of radius 0.1 scaled by 2 holds a
+/// particle dropped on it at 0.2 m (plus the contact thickness) above its centre.
+#[test]
+fn a_scaled_collider_is_as_large_as_it_looks() {
+    let mut app = app();
+    app.world_mut().spawn((
+        SoftBodyCollider::ball(0.1),
+        Transform::from_xyz(0.0, 0.0, 0.0).with_scale(Vec3::splat(2.0)),
+    ));
+    let scene = Scene {
+        gravity: [0.0, -9.8125, 0.0],
+        particles: vec![bevy_soft_body::core::scene::ParticleDesc {
+            position: [0.0, 0.5, 0.0],
+            velocity: [0.0; 3],
+            mass: 0.125,
+            pinned: false,
+        }],
+        ..Default::default()
+    };
+    let body = spawn(
+        &mut app,
+        &scene,
+        SoftBody {
+            integrator: IntegratorKind::SymplecticEuler,
+            step: StepPolicy::Fixed { h: 1.0 / 512.0 },
+            ..Default::default()
+        },
+    );
+    for _ in 0..64 {
+        app.update();
+    }
+    let y = particles_of(&app, body)[0].y;
+    assert!((y - 0.21).abs() < 1e-4, "rests at {y}, expected 0.2 + 0.01");
+}

@@ -617,6 +617,38 @@ impl Collider {
     }
 }
 
+/// The box a body's particles can reach within `dt`: their bounds grown by twice the fastest
+/// particle's travel (room for what forces add within the frame) and `margin` (`None` for a
+/// body without particles or with a non-finite one). A broad phase: a collider whose own box
+/// over the frame misses this one cannot touch the body in the frame.
+pub fn reach_bounds(
+    x: &[Vector],
+    v: &[Vector],
+    dt: Scalar,
+    margin: Scalar,
+) -> Option<(Vector, Vector)> {
+    let (mut lo, mut hi) = (
+        Vector::splat(Scalar::INFINITY),
+        Vector::splat(-Scalar::INFINITY),
+    );
+    let mut vmax2: Scalar = 0.0;
+    for (x, v) in x.iter().zip(v) {
+        lo = lo.min(*x);
+        hi = hi.max(*x);
+        vmax2 = vmax2.max(v.length_squared());
+    }
+    if x.is_empty() || !(lo.is_finite() && hi.is_finite()) {
+        return None;
+    }
+    let grow = 2.0 * vmax2.sqrt() * dt + margin;
+    Some((lo - Vector::splat(grow), hi + Vector::splat(grow)))
+}
+
+/// True when boxes `a` and `b` (corner pairs) overlap.
+pub fn boxes_overlap(a: (Vector, Vector), b: (Vector, Vector)) -> bool {
+    a.0.cmple(b.1).all() && b.0.cmple(a.1).all()
+}
+
 /// `shape` stretched by `scale` along its own axes (a transform's scale), or `None` for a
 /// shape or scale this cannot represent (a zero or non-finite factor, a compound shape). A
 /// ball, capsule, cylinder or cone under a non-uniform scale becomes a convex polyhedron of

@@ -236,10 +236,14 @@ impl BodyLayout {
                 Some(l) if l == 0.0 && s.law == SpringLaw::Strain => {
                     err(item, "rest_length", strain_needs)
                 }
-                None if s.law == SpringLaw::Strain && s.a < n && s.b < n && s.a != s.b => {
-                    if distance(self.particles[s.a].position, self.particles[s.b].position) == 0.0 {
-                        err(item, "rest_length", strain_needs);
-                    }
+                None if s.law == SpringLaw::Strain
+                    && s.a < n
+                    && s.b < n
+                    && s.a != s.b
+                    && distance(self.particles[s.a].position, self.particles[s.b].position)
+                        == 0.0 =>
+                {
+                    err(item, "rest_length", strain_needs)
                 }
                 _ => {}
             }

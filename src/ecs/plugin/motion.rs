@@ -2,9 +2,12 @@
 //! particles following their pin targets, colliders' paths.
 
 use super::*;
-use crate::core::collide::{Collider, ContactMaterial, Spin, scale_shape};
+use crate::core::collide::{
+    Collider, ContactMaterial, Spin, boxes_overlap, reach_bounds, scale_shape,
+};
 use crate::core::motion::Motion;
 use crate::math::Vector;
+use parry3d::math::Pose3;
 
 type ScriptedItem<'a> = (
     &'a ScriptedMotion,
@@ -109,6 +112,14 @@ pub(super) fn update_colliders(
     if let Some(sim) = bs.sim.as_mut() {
         sim.system.colliders.clear();
         let t0 = sim.time;
+        // Broad phase: the box the particles can reach this frame against each collider's box
+        // over the frame (its last and current poses); a body far from a collider never tests
+        // its particles against it.
+        let dt = frame_dt as Scalar;
+        let fall = sim.system.gravity.length() * dt * dt;
+        let Some(reach) = reach_bounds(&sim.state.x, &sim.state.v, dt, fall) else {
+            return;
+        };
         for (c, gt, track) in colliders {
             let (_, rot, pos) = gt.to_scale_rotation_translation();
             let (from, from_rot) = track.prev.unwrap_or((pos, rot));
@@ -116,6 +127,18 @@ pub(super) fn update_colliders(
                 .scaled
                 .as_ref()
                 .map_or_else(|| c.shape.0.clone(), |s| s.1.clone());
+            if shape.as_halfspace().is_none() {
+                let a = shape.compute_aabb(&Pose3::from_parts(from, from_rot));
+                let b = shape.compute_aabb(&Pose3::from_parts(pos, rot));
+                let grow = Vec3::splat(c.thickness.max(0.0));
+                let bounds = (
+                    (a.mins.min(b.mins) - grow).to_scalar(),
+                    (a.maxs.max(b.maxs) + grow).to_scalar(),
+                );
+                if !boxes_overlap(reach, bounds) {
+                    continue;
+                }
+            }
             let material = ContactMaterial {
                 friction: c.friction as f64,
                 restitution: c.restitution as f64,
