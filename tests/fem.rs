@@ -19,20 +19,23 @@ use bevy_soft_body::core::fem::{NeoHookean, Tets};
 use bevy_soft_body::math::ToScalar;
 use glam::{DMat3, DQuat, DVec3};
 
-/// A small deterministic generator (xorshift), so the tests need no crate.
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
+mod common;
+use common::Rng;
+
+/// Random vectors and matrices with entries in [−1, 1) (times `scale`).
+trait RandomGeometry {
+    fn f(&mut self) -> f64;
     fn v(&mut self) -> DVec3 {
         DVec3::new(self.f(), self.f(), self.f())
     }
     fn m(&mut self, scale: f64) -> DMat3 {
         DMat3::from_cols(self.v(), self.v(), self.v()) * scale
+    }
+}
+
+impl RandomGeometry for Rng {
+    fn f(&mut self) -> f64 {
+        self.signed()
     }
 }
 

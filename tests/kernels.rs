@@ -16,24 +16,16 @@ use bevy_soft_body::core::fem::{NeoHookean, Tets};
 use bevy_soft_body::core::forces::{SpringLaw, Springs};
 use bevy_soft_body::math::{EPS, Scalar, ToScalar, Vector, VectorExt};
 
-struct Rng(u64);
-impl Rng {
-    fn f(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.f() * n as f64) as usize % n
-    }
-    fn vec(&mut self, s: f64) -> Vector {
-        Vector::new(
-            (s * (2.0 * self.f() - 1.0)) as Scalar,
-            (s * (2.0 * self.f() - 1.0)) as Scalar,
-            (s * (2.0 * self.f() - 1.0)) as Scalar,
-        )
-    }
+mod common;
+use common::Rng;
+
+/// A vector with entries uniform in [−s, s).
+fn random_vec(r: &mut Rng, s: f64) -> Vector {
+    Vector::new(
+        (s * (2.0 * r.unit() - 1.0)) as Scalar,
+        (s * (2.0 * r.unit() - 1.0)) as Scalar,
+        (s * (2.0 * r.unit() - 1.0)) as Scalar,
+    )
 }
 
 /// A random network: `n` particles in a 1 m box moving at up to 1 m/s, `m` springs, most
@@ -41,9 +33,9 @@ impl Rng {
 /// zero-length springs (two particles on one spot) and both laws; damped when `damped`.
 fn network(seed: u64, n: usize, m: usize, damped: bool) -> (Springs, Vec<Vector>, Vec<Vector>) {
     let mut r = Rng(seed);
-    let mut x: Vec<Vector> = (0..n).map(|_| r.vec(1.0)).collect();
+    let mut x: Vec<Vector> = (0..n).map(|_| random_vec(&mut r, 1.0)).collect();
     x[1] = x[0];
-    let v: Vec<Vector> = (0..n).map(|_| r.vec(1.0)).collect();
+    let v: Vec<Vector> = (0..n).map(|_| random_vec(&mut r, 1.0)).collect();
     let mut s = Springs::new();
     s.push(0, 1, 0.1, 50.0, 0.2, SpringLaw::Hooke);
     s.push(2, 2, 0.1, 50.0, 0.2, SpringLaw::Hooke);
@@ -59,8 +51,11 @@ fn network(seed: u64, n: usize, m: usize, damped: bool) -> (Springs, Vec<Vector>
         } else {
             SpringLaw::Hooke
         };
-        let damping = if damped { 0.5 * r.f() } else { 0.0 };
-        let (rest, k) = ((0.05 + r.f()) as Scalar, (10.0 + 1000.0 * r.f()) as Scalar);
+        let damping = if damped { 0.5 * r.unit() } else { 0.0 };
+        let (rest, k) = (
+            (0.05 + r.unit()) as Scalar,
+            (10.0 + 1000.0 * r.unit()) as Scalar,
+        );
         s.push(i, j, rest, k, damping as Scalar, law);
     }
     (s, x, v)
@@ -160,7 +155,7 @@ fn deformed_box(seed: u64) -> (Tets, Vec<Vector>) {
         .map(|p| p.to_scalar() + Vector::new(1.0, -2.0, 0.5))
         .collect();
     for xi in x.iter_mut() {
-        *xi += r.vec(0.003);
+        *xi += random_vec(&mut r, 0.003);
     }
     for k in 0..20 {
         let i = r.below(x.len());

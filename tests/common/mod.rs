@@ -2,7 +2,42 @@
 #![allow(dead_code)]
 
 #[cfg(feature = "plugin")]
+#[allow(unused_imports)] // not every test file uses the app helpers
 pub use plugin::*;
+
+/// A small deterministic generator (xorshift 13/7/17), so the tests need no crate and every
+/// run draws the same numbers.
+pub struct Rng(pub u64);
+
+impl Rng {
+    /// The next raw state.
+    pub fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    /// Uniform in [0, 1) (53 bits).
+    pub fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [−1, 1).
+    pub fn signed(&mut self) -> f64 {
+        self.unit() * 2.0 - 1.0
+    }
+
+    /// An index below `n` (from `unit`).
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.unit() * n as f64) as usize % n
+    }
+
+    /// An index below `n` (from the raw state; `n = 0` gives 0).
+    pub fn below_raw(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
 
 #[cfg(feature = "plugin")]
 mod plugin {
