@@ -7,7 +7,10 @@
 //! `-- --bench [FRAMES]`: headless, prints ms per fixed frame for the coupled scene, the soft
 //! bodies alone and the rigid bodies alone (the table in docs/BENCHMARKS.md).
 //!
-//! Keys: O throws a ball at the curtain, C drops a crate on the trampoline, Space pause, N step,
+//! The jelly floats in a pool (a `Buoyancy` force field), and X sets off a `RadialBlast` in
+//! front of the curtain.
+//!
+//! Keys: O throws a ball at the curtain, C drops a crate on the trampoline, X blast, Space pause, N step,
 //! G wireframe; left drag pulls cloth, right drag or arrows orbit, wheel zoom. The "coupling"
 //! panel lists what the soft bodies gave each rigid body in the last frame and the momenta.
 
@@ -128,11 +131,17 @@ fn throw_balls(
 fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody, part: Part) {
     let soft = part != Part::RigidOnly;
     let rigid = part != Part::SoftOnly;
-    let mut with_look = |c: &mut Commands, e: Entity, mesh: Mesh, color: Color| {
+    fn with_look(
+        looks: &mut Option<&mut Looks>,
+        c: &mut Commands,
+        e: Entity,
+        mesh: Mesh,
+        color: Color,
+    ) {
         if let Some(l) = looks.as_mut() {
             c.entity(e).insert(l.add(mesh, color));
         }
-    };
+    }
     if rigid {
         let ground = c
             .spawn((
@@ -143,6 +152,7 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             ))
             .id();
         with_look(
+            &mut looks,
             c,
             ground,
             Plane3d::default().mesh().size(14.0, 14.0).into(),
@@ -212,6 +222,7 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             ))
             .id();
         with_look(
+            &mut looks,
             c,
             krate,
             Cuboid::new(0.4, 0.4, 0.4).into(),
@@ -230,6 +241,7 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             ))
             .id();
         with_look(
+            &mut looks,
             c,
             lamp,
             Sphere::new(0.15).into(),
@@ -257,7 +269,22 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             c.spawn(HangLamp { rope, lamp });
         }
     }
-    // A jelly at x = 2.3 that balls are thrown at.
+    // A pool at x = 2.3: water (a buoyancy field on the jelly, region and level as drawn) that
+    // a jelly floats in, half under (its particles, 20 g on a 0.1 m grid, stand for 20 kg/m³;
+    // the "water" is 40 kg/m³), and balls are thrown at.
+    if let Some(l) = looks.as_mut() {
+        let water = l.materials.add(StandardMaterial {
+            base_color: Color::srgba(0.2, 0.45, 0.8, 0.45),
+            alpha_mode: AlphaMode::Blend,
+            ..default()
+        });
+        c.spawn((
+            Name::new("water"),
+            Mesh3d(l.meshes.add(Cuboid::new(1.4, 0.3, 1.4))),
+            MeshMaterial3d(water),
+            Transform::from_xyz(2.3, 0.15, 0.9),
+        ));
+    }
     if soft {
         let mut scene = build::jelly(&build::JellyParams {
             size: [5, 5, 5],
@@ -269,9 +296,19 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             ..Default::default()
         })
         .unwrap()
-        .translated([2.3, 0.02, 0.9]);
+        .translated([2.3, 0.1, 0.9]);
         scene.colliders.clear();
-        c.spawn_soft_body(&scene, body.clone()).unwrap();
+        let jelly = c.spawn_soft_body(&scene, body.clone()).unwrap();
+        c.entity(jelly)
+            .insert(SoftBodyForceFields(vec![std::sync::Arc::new(Buoyancy {
+                level: 0.3,
+                fluid_density: 40.0,
+                body_density: 20.0,
+                gravity: 9.81,
+                layer: 0.1,
+                drag: 2.0,
+                region: Some(([1.6, 0.2], [3.0, 1.6])),
+            })]));
     }
     // A flag on a kinematic pole turning about its axis at 0.8 rad/s.
     let pole = rigid.then(|| {
@@ -285,6 +322,7 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             ))
             .id();
         with_look(
+            &mut looks,
             c,
             pole,
             Cylinder::new(0.03, 2.4).into(),
@@ -428,10 +466,12 @@ fn bench(frames: usize) {
     }
 }
 
-/// O: a ball at the curtain; C: a crate over the trampoline (the panel's integrator keys
-/// keep their letters).
+/// O: a ball at the curtain; C: a crate over the trampoline; X: a blast in front of the
+/// curtain (the panel's integrator keys keep their letters).
 fn keys(
     input: Res<ButtonInput<KeyCode>>,
+    clock: Res<SoftBodyClock>,
+    mut fields: ResMut<GlobalForceFields>,
     mut commands: Commands,
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
@@ -452,6 +492,17 @@ fn keys(
             Mesh3d(meshes.add(Sphere::new(0.12))),
             MeshMaterial3d(materials.add(Color::srgb(0.9, 0.35, 0.2))),
         ));
+    }
+    if input.just_pressed(KeyCode::KeyX) {
+        // A blast of 0.15 s, 0.4 m in front of the curtain: every soft body near it is pushed
+        // (the field acts on all bodies; far away its push is nil).
+        fields.0 = vec![std::sync::Arc::new(RadialBlast {
+            center: [-2.5, 1.2, 0.4],
+            strength: 80.0,
+            radius: 0.8,
+            start: clock.elapsed,
+            duration: 0.15,
+        })];
     }
     if input.just_pressed(KeyCode::KeyC) {
         *count += 1;

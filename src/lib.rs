@@ -55,7 +55,7 @@ pub mod prelude {
     };
     pub use crate::core::fem::NeoHookean;
     pub use crate::core::fem::mesh::TetMesh;
-    pub use crate::core::forces::{SpringLaw, Wind};
+    pub use crate::core::forces::{Buoyancy, ForceField, RadialBlast, SpringLaw, Wind};
     pub use crate::core::integrate::SolverChoice;
     pub use crate::core::integrate::{AdaptiveConfig, Integrator, IntegratorKind, StepError};
     pub use crate::core::motion::Motion;
@@ -78,11 +78,12 @@ pub mod prelude {
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{
         BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
-        GlobalWind, LinearSolverChoice, MeshBody, MeshPins, Particle, ParticleOf, Pinned,
-        ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock, SoftBodyCollider,
-        SoftBodyDiagnostics, SoftBodyDiverged, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial,
-        SoftBodyInvalid, SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems,
-        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf, triangle_mesh,
+        GlobalForceFields, GlobalWind, LinearSolverChoice, MeshBody, MeshPins, Particle,
+        ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock,
+        SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged, SoftBodyForceFields, SoftBodyGltf,
+        SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid, SoftBodyMeshSurface, SoftBodyPlugin,
+        SoftBodyStatus, SoftBodySystems, SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
+        triangle_mesh,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{

@@ -352,6 +352,7 @@ impl Linearization for ParticleModel {
                 *fi += e[i];
             }
         }
+        self.accumulate_fields(t, &state.x, &state.v, f);
     }
 
     fn assemble_damping(&self, state: &ParticleState, h: Scalar, a: &mut SpringMatrix) {
@@ -511,6 +512,10 @@ impl Linearization for ParticleModel {
             if let Some(e) = ext {
                 fc += e[i];
             }
+            // Force fields: constant over the step, at its start (no potential to minimize).
+            for field in &self.fields {
+                fc += field.force(t_end - h, x0[i], v0[i], m);
+            }
             let (dv64, v64) = (d64(v[i]) - d64(v0[i]), d64(v[i]));
             phi += 0.5 * m as f64 * dv64.length_squared() - d64(fc).dot(pos(i))
                 + 0.5 * h64 * c as f64 * v64.length_squared();
@@ -603,5 +608,43 @@ impl ParticleModel {
             kv[j] += kvr;
         }
         self.add_tet_stiffness(&state.x, h2, project_tets, a, Some((&state.v, kv)));
+        self.add_field_diagonal(state, h, h2, a, Some(kv));
+    }
+
+    /// The force fields' Jacobians where they stiffen or damp: the positive part of the
+    /// diagonal of `−∂f/∂x` (times `h2`) and of `−∂f/∂v` (times `h`) added to `a`'s diagonal
+    /// blocks, and that stiffness's `K v` to `kv`. The rest of a field acts explicitly.
+    fn add_field_diagonal(
+        &self,
+        state: &ParticleState,
+        h: Scalar,
+        h2: Scalar,
+        a: &mut SpringMatrix,
+        mut kv: Option<&mut [Vector]>,
+    ) {
+        if self.fields.is_empty() {
+            return;
+        }
+        // The time of the last force evaluation: the step's (the methods evaluate the forces,
+        // then assemble).
+        let t = self.field_time();
+        for i in 0..self.len() {
+            for field in &self.fields {
+                let Some(j) = field.jacobian(t, state.x[i], state.v[i], self.mass()[i]) else {
+                    continue;
+                };
+                let mut k = Vector::ZERO;
+                let mut d = Vector::ZERO;
+                for c in 0..3 {
+                    k[c] = (-j.dx[c][c]).max(0.0);
+                    d[c] = (-j.dv[c][c]).max(0.0);
+                }
+                let g = k * h2 + d * h;
+                a.diag[i] += Matrix3::from_cols(Vector::X * g.x, Vector::Y * g.y, Vector::Z * g.z);
+                if let Some(kv) = kv.as_deref_mut() {
+                    kv[i] -= k * state.v[i];
+                }
+            }
+        }
     }
 }

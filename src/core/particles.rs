@@ -40,8 +40,36 @@ pub struct ParticleModel {
     pub drag: Scalar,
     wind: Option<(Wind, WindField)>,
     external: Option<Vec<Vector>>,
+    /// Force fields on every particle (empty: none evaluated).
+    pub fields: Vec<crate::core::forces::SharedField>,
+    /// Time of the last force evaluation with fields (for their Jacobians).
+    field_time: FieldClock,
     /// Shapes the particles collide with (empty: no collision pass).
     pub colliders: Vec<Collider>,
+}
+
+/// The time of a model's last force evaluation with fields, shared by reference (force
+/// evaluations take `&self`).
+#[derive(Debug, Default)]
+struct FieldClock(std::sync::atomic::AtomicU64);
+
+impl FieldClock {
+    fn set(&self, t: Scalar) {
+        self.0
+            .store((t as f64).to_bits(), std::sync::atomic::Ordering::Relaxed);
+    }
+
+    fn get(&self) -> Scalar {
+        f64::from_bits(self.0.load(std::sync::atomic::Ordering::Relaxed)) as Scalar
+    }
+}
+
+impl Clone for FieldClock {
+    fn clone(&self) -> Self {
+        let c = Self::default();
+        c.set(self.get());
+        c
+    }
 }
 
 /// Why a model cannot be simulated.
@@ -121,6 +149,11 @@ impl ParticleModel {
             inv_mass,
             ..Default::default()
         }
+    }
+
+    /// Time of the last force evaluation that involved force fields.
+    pub(crate) fn field_time(&self) -> Scalar {
+        self.field_time.get()
     }
 
     /// Number of particles.
@@ -337,6 +370,20 @@ impl ParticleModel {
         if let Some(ext) = &self.external {
             for (fi, e) in f.iter_mut().zip(ext) {
                 *fi += *e;
+            }
+        }
+        self.accumulate_fields(t, &state.x, &state.v, f);
+    }
+
+    /// Adds the force fields' forces into `f` (nothing when there are none).
+    pub fn accumulate_fields(&self, t: Scalar, x: &[Vector], v: &[Vector], f: &mut [Vector]) {
+        if self.fields.is_empty() {
+            return;
+        }
+        self.field_time.set(t);
+        for (i, fi) in f.iter_mut().enumerate() {
+            for field in &self.fields {
+                *fi += field.force(t, x[i], v[i], self.mass[i]);
             }
         }
     }

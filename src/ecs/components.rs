@@ -411,6 +411,20 @@ impl From<SoftBodyWind> for crate::core::forces::Wind {
 #[reflect(Resource, Default, Debug)]
 pub struct GlobalWind(pub Option<SoftBodyWind>);
 
+/// Force fields on one body (on its root): laws of the game's own, evaluated at every force
+/// evaluation ([`ForceField`](crate::core::forces::ForceField); built-ins
+/// [`Buoyancy`](crate::core::forces::Buoyancy) and
+/// [`RadialBlast`](crate::core::forces::RadialBlast)). Editing the list takes effect on the
+/// next fixed step.
+#[derive(Component, Reflect, Clone, Debug, Default)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodyForceFields(#[reflect(ignore)] pub Vec<crate::core::forces::SharedField>);
+
+/// Force fields on every body, after each body's own [`SoftBodyForceFields`].
+#[derive(Resource, Reflect, Clone, Debug, Default)]
+#[reflect(Resource, Default, Debug)]
+pub struct GlobalForceFields(#[reflect(ignore)] pub Vec<crate::core::forces::SharedField>);
+
 /// A parry3d shape (reflected as an opaque value).
 #[derive(Clone, Deref)]
 pub struct ColliderShape(pub SharedShape);

@@ -212,7 +212,7 @@ fn build_body(
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub(crate) fn prepare(
     fixed: Res<Time<Fixed>>,
-    global_wind: Res<GlobalWind>,
+    (global_wind, global_fields): (Res<GlobalWind>, Res<GlobalForceFields>),
     mut bodies: Query<(
         Entity,
         Ref<SoftBody>,
@@ -225,6 +225,7 @@ pub(crate) fn prepare(
             Option<&BodyTets>,
             Option<Ref<ElasticMaterial>>,
             Option<Ref<LinearSolverChoice>>,
+            Option<&SoftBodyForceFields>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -259,7 +260,7 @@ pub(crate) fn prepare(
     edited.sort_unstable();
     edited.dedup();
     let no_list: &[Entity] = &[];
-    for (body_e, body, mut bs, mut status, plist, slist, wind, (tlist, material, solver)) in
+    for (body_e, body, mut bs, mut status, plist, slist, wind, (tlist, material, solver, fields)) in
         &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
@@ -373,5 +374,20 @@ pub(crate) fn prepare(
             update_follow(bs, &targets);
         }
         update_colliders(bs, &colliders, frame_dt);
+        // Force fields: the body's, then everyone's (a list of shared handles, set every frame,
+        // so edits need no rebuild).
+        if let Some(sim) = bs.sim.as_mut() {
+            let own = fields.map_or(&[][..], |f| &f.0[..]);
+            if sim.system.fields.len() != own.len() + global_fields.0.len()
+                || !sim
+                    .system
+                    .fields
+                    .iter()
+                    .zip(own.iter().chain(&global_fields.0))
+                    .all(|(a, b)| std::sync::Arc::ptr_eq(a, b))
+            {
+                sim.system.fields = own.iter().chain(&global_fields.0).cloned().collect();
+            }
+        }
     }
 }
