@@ -636,3 +636,67 @@ fn a_light_ball_rests_on_a_heavy_jelly() {
     );
     assert!(v.length() < 0.02, "at rest: {v}");
 }
+
+/// Where a staggered attachment stops being stable: a rigid ball hanging from the end of a
+/// rope of 12 springs (k = 8000 N/m, 20 g particles), let go 20° off the vertical, for ball
+/// masses from 4 kg down to 20 g. The rope's pull reaches the ball as a force held over avian's
+/// step, an explicit coupling: it is stable while `Δ·√(k/M)` stays below about 2. Prints the
+/// table in the README (`cargo test --features avian --test avian -- --ignored --nocapture`).
+#[test]
+#[ignore = "a measurement, not a check"]
+fn attachment_stability_against_the_mass_of_the_body() {
+    println!("| ball mass (kg) | Δ·√(k/M) | largest ball speed in 3 s (m/s) | rope |");
+    println!("| ---: | ---: | ---: | --- |");
+    for mass in [4.0f32, 2.0, 1.0, 0.5, 0.3, 0.2, 0.1, 0.05, 0.02] {
+        let mut app = app();
+        let links = 12;
+        let mut scene = build::chain(&build::ChainParams {
+            particles: links + 1,
+            link: 0.1,
+            mass: 0.02,
+            stiffness: 8000.0,
+            damping: 0.5,
+            drag: 0.005,
+            direction: [0.34, -0.94, 0.0],
+            ..Default::default()
+        })
+        .unwrap()
+        .translated([0.0, 2.0, 0.0]);
+        scene.gravity = [0.0, -9.81, 0.0];
+        let end = scene.particles[links].position;
+        let ball = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::sphere(0.1),
+                Mass(mass),
+                Transform::from_xyz(end[0] as f32, end[1] as f32 - 0.1, end[2] as f32),
+            ))
+            .id();
+        app.update();
+        let rope = spawn(&mut app, &scene, explicit(1.0 / 1200.0));
+        app.update();
+        let last = app.world().get::<BodyParticles>(rope).unwrap().entities()[links];
+        app.world_mut()
+            .entity_mut(last)
+            .insert(Pinned::to(ball, Vec3::Y * 0.1));
+        let mut fastest = 0.0f32;
+        for _ in 0..(3.0 * HZ) as usize {
+            app.update();
+            let v = app.world().get::<LinearVelocity>(ball).unwrap().0.length();
+            fastest = fastest.max(if v.is_finite() { v } else { f32::INFINITY });
+        }
+        let state = app
+            .world()
+            .get::<SoftBodyStatus>(rope)
+            .unwrap()
+            .state
+            .clone();
+        let rope_state = match state {
+            BodyState::Running => "running".to_string(),
+            other => format!("{other:?}").chars().take(40).collect(),
+        };
+        let wd = (8000.0 / mass as f64).sqrt() / HZ;
+        println!("| {mass} | {wd:.2} | {fastest:.2} | {rope_state} |");
+    }
+}
