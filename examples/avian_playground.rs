@@ -195,18 +195,11 @@ fn spawn_world(c: &mut Commands, mut looks: Option<&mut Looks>, body: &SoftBody,
             k_flex: 100.0,
             damping: 2.0,
             drag: 0.05,
-            pins: build::ClothPins::None,
+            pins: build::ClothPins::Border,
             hanging: false,
             origin: [0.3, 0.8, 0.0],
         })
         .unwrap();
-        for i in 0..n {
-            for j in 0..n {
-                if i == 0 || j == 0 || i == n - 1 || j == n - 1 {
-                    scene.particles[i * n + j].pinned = true;
-                }
-            }
-        }
         scene.colliders.clear();
         c.spawn_soft_body(&scene, body.clone()).unwrap();
     }

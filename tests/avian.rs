@@ -194,18 +194,11 @@ fn trampoline() -> Scene {
         k_flex: 100.0,
         damping: 2.0,
         drag: 0.05,
-        pins: build::ClothPins::None,
+        pins: build::ClothPins::Border,
         hanging: false,
         origin: [0.0, 0.0, 0.0],
     })
     .unwrap();
-    for i in 0..n {
-        for j in 0..n {
-            if i == 0 || j == 0 || i == n - 1 || j == n - 1 {
-                scene.particles[i * n + j].pinned = true;
-            }
-        }
-    }
     scene.colliders.clear();
     scene
 }
@@ -235,15 +228,6 @@ fn a_crate_comes_to_rest_on_a_trampoline_held_by_its_weight() {
     let (mut impulse, mut ys, mut speed) = (0.0f64, vec![], 0.0f32);
     for f in 0..frames {
         app.update();
-        if f % 10 == 0 && std::env::var("TRACE").is_ok() {
-            let w = app.world();
-            println!(
-                "{f} y {:.5} vy {:.5} J {:.4}",
-                w.get::<Position>(krate).unwrap().0.y,
-                w.get::<LinearVelocity>(krate).unwrap().0.y,
-                w.get::<SoftBodyImpulse>(krate).map_or(0.0, |i| i.linear.y)
-            );
-        }
         if f >= frames - last_second {
             impulse += app
                 .world()
@@ -637,13 +621,15 @@ fn a_light_ball_rests_on_a_heavy_jelly() {
     assert!(v.length() < 0.02, "at rest: {v}");
 }
 
-/// Where a staggered attachment stops being stable: a rigid ball hanging from the end of a
-/// rope of 12 springs (k = 8000 N/m, 20 g particles), let go 20° off the vertical, for ball
-/// masses from 4 kg down to 20 g. The rope's pull reaches the ball as a force held over avian's
-/// step, an explicit coupling: it is stable while `Δ·√(k/M)` stays below about 2. Prints the
-/// table in the README (`cargo test --features avian --test avian -- --ignored --nocapture`).
+/// Where a staggered attachment stops being stable, and what happens past it: a rigid ball
+/// hanging from the end of a rope of 12 springs (k = 8000 N/m, 20 g particles), let go 20° off
+/// the vertical, for ball masses from 4 kg down to 20 g. The rope's pull reaches the ball as a
+/// force held over avian's step, an explicit coupling, stable while `Δ·√(k/M)` stays below
+/// about 2. Below 1.1 the ball swings as a pendulum (top speed √(2gL(1 − cos 20°)) ≈ 1.3 m/s
+/// for L ≈ 1.45 m); past the limit the push is capped at `max_velocity_change` (50 m/s a
+/// frame) and everything stays finite, the rope still running. Prints the table in the README
+/// (`--nocapture`).
 #[test]
-#[ignore = "a measurement, not a check"]
 fn attachment_stability_against_the_mass_of_the_body() {
     println!("| ball mass (kg) | Δ·√(k/M) | largest ball speed in 3 s (m/s) | rope |");
     println!("| ---: | ---: | ---: | --- |");
@@ -698,5 +684,14 @@ fn attachment_stability_against_the_mass_of_the_body() {
         };
         let wd = (8000.0 / mass as f64).sqrt() / HZ;
         println!("| {mass} | {wd:.2} | {fastest:.2} | {rope_state} |");
+        if wd < 1.1 {
+            // The pendulum's speed (1.3 m/s) with 20 % for the rope's stretch and swing.
+            assert!(fastest < 1.6, "{mass} kg: top speed {fastest} m/s");
+        }
+        assert!(
+            fastest.is_finite(),
+            "{mass} kg: the ball's velocity is not finite"
+        );
+        assert_eq!(rope_state, "running", "{mass} kg");
     }
 }

@@ -151,29 +151,8 @@ fn a_jelly_floats_at_the_depth_archimedes_gives() {
                 ..Default::default()
             },
         );
-        for f in 0..(8 * 60) {
+        for _ in 0..(8 * 60) {
             sim.advance_frame().unwrap();
-            if f % 60 == 0 && std::env::var("TRACE").is_ok() {
-                let n = sim.state.x.len() as f64;
-                let cy: f64 = sim.state.x.iter().map(|x| x.y as f64).sum::<f64>() / n;
-                let vy: f64 = sim.state.v.iter().map(|v| v.y as f64).sum::<f64>() / n;
-                let lo = sim
-                    .state
-                    .x
-                    .iter()
-                    .map(|x| x.y as f64)
-                    .fold(f64::INFINITY, f64::min);
-                let hi = sim
-                    .state
-                    .x
-                    .iter()
-                    .map(|x| x.y as f64)
-                    .fold(f64::NEG_INFINITY, f64::max);
-                println!(
-                    "t {} centroid {cy:.4} vy {vy:.4} bottom {lo:.4} top {hi:.4}",
-                    f / 60
-                );
-            }
         }
         let bottom = sim
             .state

@@ -516,3 +516,20 @@ fn free_fall_is_not_divergence() {
     let vy = sim.state.v[0].y as f64;
     assert!(vy < -9.0, "falling at {vy} m/s");
 }
+
+/// `ClothPins::Border` holds exactly the border: 4 (n − 1) particles of an n × n cloth.
+#[test]
+fn a_border_pinned_cloth_holds_its_border() {
+    let n = 9;
+    let s = build::cloth(&build::ClothParams {
+        pins: build::ClothPins::Border,
+        ..build::ClothParams::default().resized(n, n)
+    })
+    .unwrap();
+    let pinned: Vec<usize> = (0..n * n).filter(|&k| s.particles[k].pinned).collect();
+    assert_eq!(pinned.len(), 4 * (n - 1));
+    assert!(pinned.iter().all(|&k| {
+        let (i, j) = (k / n, k % n);
+        i == 0 || j == 0 || i == n - 1 || j == n - 1
+    }));
+}

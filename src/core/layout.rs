@@ -290,6 +290,19 @@ impl BodyLayout {
         })
     }
 
+    /// The initial state: the particles' positions and velocities, pinned ones at rest.
+    pub fn initial_state(&self) -> ParticleState {
+        let mut state = ParticleState::zeros(self.particles.len());
+        for (i, p) in self.particles.iter().enumerate() {
+            state.x[i] = p.position.to_scalar();
+            state.v[i] = match p.anchor {
+                Anchor::Pinned => [0.0; 3].to_scalar(),
+                _ => p.velocity.to_scalar(),
+            };
+        }
+        state
+    }
+
     /// Validates, then builds the model and its initial state. Numbers enter the model through
     /// [`ToScalar`] (exact from `f32` inputs in either precision).
     pub fn build(&self) -> Result<(ParticleModel, ParticleState), Vec<LayoutError>> {
@@ -299,13 +312,8 @@ impl BodyLayout {
         }
         let mut model =
             ParticleModel::new(self.particles.iter().map(|p| p.mass.to_scalar()).collect());
-        let mut state = ParticleState::zeros(self.particles.len());
+        let state = self.initial_state();
         for (i, p) in self.particles.iter().enumerate() {
-            state.x[i] = p.position.to_scalar();
-            state.v[i] = match p.anchor {
-                Anchor::Pinned => [0.0; 3].to_scalar(),
-                _ => p.velocity.to_scalar(),
-            };
             match p.anchor {
                 Anchor::Free => {}
                 Anchor::Pinned => model.pin(i, state.x[i]),

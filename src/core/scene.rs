@@ -11,7 +11,6 @@ use crate::core::layout::{
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
-use crate::math::ToScalar;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -385,23 +384,7 @@ impl Scene {
 
     /// The initial state, as [`Scene::build`] makes it (pinned particles at rest).
     pub fn initial_state(&self) -> ParticleState {
-        let layout = self.layout();
-        ParticleState {
-            x: layout
-                .particles
-                .iter()
-                .map(|p| p.position.to_scalar())
-                .collect(),
-            v: layout
-                .particles
-                .iter()
-                .map(|p| match p.anchor {
-                    Anchor::Pinned => [0.0; 3],
-                    _ => p.velocity,
-                })
-                .map(ToScalar::to_scalar)
-                .collect(),
-        }
+        self.layout().initial_state()
     }
 
     /// The same scene moved by `offset`: particles, prescribed paths and colliders (to place

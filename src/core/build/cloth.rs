@@ -17,6 +17,8 @@ pub enum ClothPins {
     TopEdge,
     /// The four corners.
     FourCorners,
+    /// Every particle of the border (a trampoline, a drum skin).
+    Border,
     /// Nothing (the cloth falls).
     None,
 }
@@ -159,6 +161,15 @@ pub fn cloth(p: &ClothParams) -> Result<Scene, BuildError> {
         ClothPins::FourCorners => {
             for (i, j) in [(0, 0), (0, m - 1), (n - 1, 0), (n - 1, m - 1)] {
                 pin(&mut s, i, j);
+            }
+        }
+        ClothPins::Border => {
+            for i in 0..n {
+                for j in 0..m {
+                    if i == 0 || j == 0 || i == n - 1 || j == m - 1 {
+                        pin(&mut s, i, j);
+                    }
+                }
             }
         }
         ClothPins::None => {}

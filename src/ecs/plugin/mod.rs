@@ -284,4 +284,8 @@ pub struct ColliderTrack {
     prev: Option<(Vec3, Quat)>,
     /// The shape scaled by this scale (absent: scale one, or a shape that cannot be scaled).
     scaled: Option<(Vec3, crate::core::collide::SharedShape)>,
+    /// Its box over the coming frame, grown by its thickness (absent: unbounded, a half-space).
+    frame_box: Option<(crate::math::Vector, crate::math::Vector)>,
+    /// Its turn (axis × angle) from the last orientation to the current one.
+    turn: Vec3,
 }

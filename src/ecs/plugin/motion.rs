@@ -68,8 +68,9 @@ pub(super) fn update_follow(bs: &mut BodySim, targets: &Query<&GlobalTransform>)
     }
 }
 
-/// Keeps each collider's shape scaled by its transform's scale (rescaled only when the scale
-/// or the shape changes: a triangle mesh costs a copy).
+/// Once a frame per collider, what every body then reads: its shape at its transform's scale
+/// (rescaled only when the scale or the shape changes: a triangle mesh costs a copy), its box
+/// over the frame (last and current pose, grown by its thickness) and its turn over the frame.
 pub(super) fn scale_colliders(
     mut colliders: Query<(
         Entity,
@@ -79,23 +80,44 @@ pub(super) fn scale_colliders(
     )>,
 ) {
     for (e, c, gt, mut track) in &mut colliders {
-        let scale = gt.to_scale_rotation_translation().0;
+        let (scale, rot, pos) = gt.to_scale_rotation_translation();
         let current = track.scaled.as_ref().map_or(Vec3::ONE, |s| s.0);
-        if scale == current && !c.is_changed() {
-            continue;
-        }
-        track.scaled = if scale == Vec3::ONE {
-            None
-        } else {
-            match scale_shape(&c.shape.0, scale, 16) {
-                Some(shape) => Some((scale, shape)),
-                None => {
-                    warn!(
-                        "collider {e}: its shape cannot take the scale {scale}; the unscaled shape is used"
-                    );
-                    None
+        if scale != current || c.is_changed() {
+            track.scaled = if scale == Vec3::ONE {
+                None
+            } else {
+                match scale_shape(&c.shape.0, scale, 16) {
+                    Some(shape) => Some((scale, shape)),
+                    None => {
+                        warn!(
+                            "collider {e}: its shape cannot take the scale {scale}; the unscaled shape is used"
+                        );
+                        None
+                    }
                 }
-            }
+            };
+        }
+        let (from, from_rot) = track.prev.unwrap_or((pos, rot));
+        let shape = track.scaled.as_ref().map_or(&c.shape.0, |s| &s.1);
+        track.frame_box = shape.as_halfspace().is_none().then(|| {
+            let a = shape.compute_aabb(&Pose3::from_parts(from, from_rot));
+            let b = shape.compute_aabb(&Pose3::from_parts(pos, rot));
+            let grow = Vec3::splat(c.thickness.max(0.0));
+            (
+                (a.mins.min(b.mins) - grow).to_scalar(),
+                (a.maxs.max(b.maxs) + grow).to_scalar(),
+            )
+        });
+        // The shortest turn from the last orientation to this one.
+        let mut turn = rot * from_rot.inverse();
+        if turn.w < 0.0 {
+            turn = -turn;
+        }
+        let axis_angle = turn.to_scaled_axis();
+        track.turn = if axis_angle.is_finite() {
+            axis_angle
+        } else {
+            Vec3::ZERO
         };
     }
 }
@@ -121,24 +143,18 @@ pub(super) fn update_colliders(
             return;
         };
         for (c, gt, track) in colliders {
+            if track
+                .frame_box
+                .is_some_and(|bounds| !boxes_overlap(reach, bounds))
+            {
+                continue;
+            }
             let (_, rot, pos) = gt.to_scale_rotation_translation();
             let (from, from_rot) = track.prev.unwrap_or((pos, rot));
             let shape = track
                 .scaled
                 .as_ref()
                 .map_or_else(|| c.shape.0.clone(), |s| s.1.clone());
-            if shape.as_halfspace().is_none() {
-                let a = shape.compute_aabb(&Pose3::from_parts(from, from_rot));
-                let b = shape.compute_aabb(&Pose3::from_parts(pos, rot));
-                let grow = Vec3::splat(c.thickness.max(0.0));
-                let bounds = (
-                    (a.mins.min(b.mins) - grow).to_scalar(),
-                    (a.maxs.max(b.maxs) + grow).to_scalar(),
-                );
-                if !boxes_overlap(reach, bounds) {
-                    continue;
-                }
-            }
             let material = ContactMaterial {
                 friction: c.friction as f64,
                 restitution: c.restitution as f64,
@@ -146,16 +162,11 @@ pub(super) fn update_colliders(
                 bounce_threshold: c.bounce_threshold as f64,
             };
             let mut collider = Collider::new(shape, linear(from, pos, t0, frame_dt), rot, material);
-            // The shortest turn from the last orientation to this one, spread over the step.
-            let mut turn = rot * from_rot.inverse();
-            if turn.w < 0.0 {
-                turn = -turn;
-            }
-            let axis_angle = turn.to_scaled_axis();
-            if axis_angle != Vec3::ZERO && axis_angle.is_finite() {
+            // The turn from the last orientation to this one, spread over the step.
+            if track.turn != Vec3::ZERO {
                 collider.rotation = from_rot;
                 collider = collider.with_spin(Spin {
-                    angular_velocity: (axis_angle / frame_dt as f32).to_scalar(),
+                    angular_velocity: (track.turn / frame_dt as f32).to_scalar(),
                     t0,
                     center: Vector::ZERO,
                 });
