@@ -12,7 +12,7 @@
 //! explodes) stops the run with an error naming scene, frame and time; everything up to the
 //! last good frame is kept on disk, and the exit status is 2.
 //!
-//! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly`,
+//! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly|cloth_pile`,
 //! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b` (or a name), `--h STEP`, `--cfl NUMBER`,
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
@@ -148,6 +148,7 @@ fn builtin(name: &str, size: usize) -> Result<Scene, String> {
         "wire" => build::wire(11, 0.05, 100),
         "pyramid" => build::pyramid(4, 0.2, 0.05, 500.0, 0.5, 0.5),
         "jelly" => build::jelly(&build::JellyParams::default()),
+        "cloth_pile" => build::cloth_pile(&build::ClothPileParams::default().with_resolution(size)),
         other => return Err(format!("unknown scene '{other}'")),
     };
     s.map_err(|e| e.to_string())

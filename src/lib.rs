@@ -62,6 +62,7 @@ pub mod prelude {
     pub use crate::core::ode::{CircleSystem, Energy, OdeState, OdeSystem, ParticleState};
     pub use crate::core::particles::ParticleModel;
     pub use crate::core::scene::{Scene, SceneError};
+    pub use crate::core::self_contact::SelfContactParams;
     pub use crate::math::{PRECISION, Scalar, Vector};
 
     #[cfg(feature = "plugin")]
@@ -79,11 +80,11 @@ pub mod prelude {
     pub use crate::ecs::{
         BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
         GlobalForceFields, GlobalWind, LinearSolverChoice, MeshBody, MeshPins, Particle,
-        ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SoftBody, SoftBodyClock,
-        SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged, SoftBodyForceFields, SoftBodyGltf,
-        SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid, SoftBodyMeshSurface, SoftBodyPlugin,
-        SoftBodyStatus, SoftBodySystems, SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tet, TetOf,
-        triangle_mesh,
+        ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SelfCollision, SoftBody,
+        SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged,
+        SoftBodyForceFields, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid,
+        SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems, SoftBodyWind,
+        SpawnSoftBody, Spring, SpringOf, Tet, TetOf, triangle_mesh,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{

@@ -454,6 +454,40 @@ impl Collider {
         }
     }
 
+    /// [`Collider::contact`] for a particle that ended a step of length `h` at `p` with
+    /// velocity `v`: when it moved relative to the surface by more than the thickness, the
+    /// segment it swept (back from `p` by `h` times its relative velocity — its exact start
+    /// under symplectic Euler) is cast against the shape, and a hit from outside is the
+    /// contact, on the side it came from. Without this a particle crossing a shape thinner
+    /// than its travel in one step would pass through (or be pushed out the far side).
+    fn swept_contact(
+        &self,
+        pose: &Pose,
+        thick: Scalar,
+        h: Scalar,
+        p: Vector,
+        v: Vector,
+    ) -> Option<(Vector, Vector)> {
+        let travel = (v - Self::surface_velocity(pose, p)) * h;
+        if matches!(self.fast, Fast::Plane(_)) || travel.length_squared() <= thick * thick {
+            return self.contact(pose, thick, p);
+        }
+        let start = p - travel;
+        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        let ray = parry3d::query::Ray::new(start.to_f32(), travel.to_f32());
+        match self
+            .shape
+            .cast_ray_and_get_normal(&shape_pose, &ray, 1.0, true)
+        {
+            Some(hit) if hit.time_of_impact > 0.0 => {
+                let n = hit.normal.to_scalar();
+                let at = start + travel * hit.time_of_impact as Scalar;
+                Some((at + n * thick, n))
+            }
+            _ => self.contact(pose, thick, p),
+        }
+    }
+
     /// Velocity of the collider's surface at `p` (at `pose`).
     fn surface_velocity(pose: &Pose, p: Vector) -> Vector {
         if pose.omega == Vector::ZERO {
@@ -501,18 +535,33 @@ impl Collider {
         }
     }
 
-    /// Pushes particles out of the collider at time `t` and applies restitution and friction.
-    /// `inv_mass` selects the particles that respond (zero: pinned or prescribed). Returns the
-    /// number of particles in contact.
+    /// Marks in `out` the particles within the collider's thickness plus `slack` of it at
+    /// time `t` (resting on it or pressed into it).
+    pub fn touching(&self, t: Scalar, slack: Scalar, x: &[Vector], out: &mut [bool]) {
+        let pose = self.pose(t);
+        let thick = self.material.thickness as Scalar + slack;
+        for (i, p) in x.iter().enumerate() {
+            if !out[i] && self.contact(&pose, thick, *p).is_some() {
+                out[i] = true;
+            }
+        }
+    }
+
+    /// Pushes particles out of the collider at the end `t` of a step of length `h` and applies
+    /// restitution and friction; particles that moved more than the thickness in the step are
+    /// tested along the path they swept (continuous detection). `inv_mass` selects the
+    /// particles that respond (zero: pinned or prescribed). Returns the number of particles in
+    /// contact.
     pub fn resolve(
         &self,
         t: Scalar,
+        h: Scalar,
         x: &mut [Vector],
         v: &mut [Vector],
         inv_mass: &[Scalar],
     ) -> usize {
         if let Some(r) = &self.response {
-            return self.resolve_exchanging(r, t, x, v, inv_mass);
+            return self.resolve_exchanging(r, t, h, x, v, inv_mass);
         }
         let pose = self.pose(t);
         let m = &self.material;
@@ -522,7 +571,7 @@ impl Collider {
             if inv_mass[i] == 0.0 {
                 continue;
             }
-            let hit = self.contact(&pose, thick, x[i]);
+            let hit = self.swept_contact(&pose, thick, h, x[i], v[i]);
             if let Some((target, n)) = hit {
                 contacts += 1;
                 x[i] = target;
@@ -562,6 +611,7 @@ impl Collider {
         &self,
         body: &Response,
         t: Scalar,
+        h: Scalar,
         x: &mut [Vector],
         v: &mut [Vector],
         inv_mass: &[Scalar],
@@ -581,7 +631,7 @@ impl Collider {
             if wp == 0.0 {
                 continue;
             }
-            let Some((target, n)) = self.contact(&pose, thick, x[i]) else {
+            let Some((target, n)) = self.swept_contact(&pose, thick, h, x[i], v[i]) else {
                 continue;
             };
             contacts += 1;

@@ -325,6 +325,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         // of a diverging frame may already be far from it while still finite.
         let t_start = self.time64;
         self.backup.copy_from(&self.state);
+        self.system.begin_frame(&self.state);
         let h_pol = self.step_size();
         let mut rep = FrameReport {
             substeps: 0,
@@ -397,6 +398,21 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             rep.substeps += 1;
             rep.h_min = rep.h_min.min(taken);
             rep.h_max = rep.h_max.max(taken);
+        }
+        // Frame-level contact (self-collision): what must hold in every delivered state.
+        self.system.end_frame(t_end as Scalar, &mut self.state);
+        if !self.state.is_finite() {
+            self.state.copy_from(&self.backup);
+            let t = self.time64 as Scalar;
+            self.time64 = t_start;
+            self.time = t_start as Scalar;
+            return Err(Divergence {
+                frame: self.frame,
+                time: t as f64,
+                h: rep.h_max as f64,
+                integrator: self.config.integrator,
+                reason: DivergenceReason::NonFinite,
+            });
         }
         self.frame += 1;
         Ok(rep)

@@ -15,6 +15,7 @@ use crate::core::forces::{SpringLaw, Wind};
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
+use crate::core::self_contact::{ContactSurface, SelfContact, SelfContactParams};
 use crate::math::ToScalar;
 use glam::DVec3;
 use std::fmt;
@@ -91,6 +92,10 @@ pub struct BodyLayout {
     pub drag: f64,
     /// Wind.
     pub wind: Option<Wind>,
+    /// Surface triangles (particle indices), for contact of the surface with itself.
+    pub surface: Vec<[u32; 3]>,
+    /// Contact of the surface with itself (`None`: none).
+    pub self_collision: Option<SelfContactParams>,
 }
 
 /// Which part of a layout a problem is in.
@@ -184,6 +189,29 @@ impl BodyLayout {
         }
         if let Some(Err(m)) = self.material.map(|m| m.validate()) {
             err(LayoutItem::Body, "material", m);
+        }
+        if let Some(sc) = &self.self_collision {
+            if self.surface.iter().flatten().any(|&i| i as usize >= n) {
+                err(
+                    LayoutItem::Body,
+                    "surface",
+                    "a triangle's index is out of range",
+                );
+            } else {
+                let x: Vec<DVec3> = self
+                    .particles
+                    .iter()
+                    .map(|p| DVec3::from_array(p.position))
+                    .collect();
+                let shortest = ContactSurface::new(&self.surface).shortest_edge(&x);
+                if let Err((field, m)) = sc.validate(shortest) {
+                    let field = match field {
+                        "friction" => "self_collision.friction",
+                        _ => "self_collision.thickness",
+                    };
+                    err(LayoutItem::Body, field, &m);
+                }
+            }
         }
         for (i, p) in self.particles.iter().enumerate() {
             let item = LayoutItem::Particle(i);
@@ -344,6 +372,9 @@ impl BodyLayout {
         model.gravity = self.gravity.to_scalar();
         model.drag = self.drag.to_scalar();
         model.set_wind(self.wind);
+        model.self_contact = self
+            .self_collision
+            .map(|p| SelfContact::new(ContactSurface::new(&self.surface), p));
         for &(p, f) in &self.forces {
             model.set_external_force(p, f.to_scalar());
         }

@@ -15,5 +15,6 @@ pub mod motion;
 pub mod ode;
 pub mod particles;
 pub mod scene;
+pub mod self_contact;
 pub mod solve;
 pub mod study;

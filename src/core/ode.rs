@@ -108,8 +108,15 @@ pub trait OdeSystem<S: OdeState>: Sync {
         false
     }
 
+    /// Called at the start of each frame with the state it starts from (default: nothing).
+    fn begin_frame(&mut self, _state: &S) {}
+
     /// Collision response after a step ending at `t` of size `h` (default: none).
-    fn resolve_contacts(&self, _t: Scalar, _h: Scalar, _state: &mut S) {}
+    fn resolve_contacts(&mut self, _t: Scalar, _h: Scalar, _state: &mut S) {}
+
+    /// Collision response at the end `t` of a frame, after its last step (default: none): what
+    /// must hold in every state a frame delivers (a surface free of self-intersections).
+    fn end_frame(&mut self, _t: Scalar, _state: &mut S) {}
 
     /// True when implicit methods should solve with a direct factorization by default
     /// (finite-element bodies).

@@ -46,6 +46,8 @@ pub struct ParticleModel {
     field_time: FieldClock,
     /// Shapes the particles collide with (empty: no collision pass).
     pub colliders: Vec<Collider>,
+    /// The surface's contact with itself (`None`: no pass, no cost).
+    pub self_contact: Option<crate::core::self_contact::SelfContact>,
 }
 
 /// The time of a model's last force evaluation with fields, shared by reference (force
@@ -132,6 +134,23 @@ impl std::fmt::Display for ModelError {
 impl std::error::Error for ModelError {}
 
 impl ParticleModel {
+    /// A self-contact pass at time `t`, with the particles touching a collider (within its
+    /// thickness plus half the surface's) marked as supported.
+    fn self_contact_pass(
+        sc: &mut crate::core::self_contact::SelfContact,
+        colliders: &[Collider],
+        inv_mass: &[Scalar],
+        t: Scalar,
+        state: &mut ParticleState,
+    ) {
+        let slack = 0.5 * sc.params.thickness as Scalar;
+        let support = sc.support_mut(state.x.len());
+        for c in colliders {
+            c.touching(t, slack, &state.x, support);
+        }
+        sc.pass(&mut state.x, &mut state.v, inv_mass);
+    }
+
     /// A model of particles with the given masses, all free, with no forces.
     pub fn new(mass: Vec<Scalar>) -> Self {
         let inv_mass = mass
@@ -641,9 +660,34 @@ impl OdeSystem<ParticleState> for ParticleModel {
         Some(self)
     }
 
-    fn resolve_contacts(&self, t: Scalar, _h: Scalar, state: &mut ParticleState) {
+    fn begin_frame(&mut self, state: &ParticleState) {
+        if let Some(sc) = &mut self.self_contact {
+            sc.begin_frame(&state.x);
+        }
+    }
+
+    /// Colliders (continuous against each), then the surface against itself when its parts
+    /// may have come closer by half its thickness since the last pass.
+    fn resolve_contacts(&mut self, t: Scalar, h: Scalar, state: &mut ParticleState) {
         for c in &self.colliders {
-            c.resolve(t, &mut state.x, &mut state.v, &self.inv_mass);
+            c.resolve(t, h, &mut state.x, &mut state.v, &self.inv_mass);
+        }
+        if let Some(sc) = &mut self.self_contact
+            && sc.advance(h, &state.v)
+        {
+            Self::self_contact_pass(sc, &self.colliders, &self.inv_mass, t, state);
+        }
+    }
+
+    /// The surface's last pass of the frame (Bridson, Fedkiw and Anderson 2002: the collision
+    /// step spans internal-dynamics steps; here it spans as many steps as keep the motion
+    /// within half the thickness, and ends with the frame), so every state a frame delivers
+    /// is free of self-intersections.
+    fn end_frame(&mut self, t: Scalar, state: &mut ParticleState) {
+        if let Some(sc) = &mut self.self_contact
+            && sc.pending()
+        {
+            Self::self_contact_pass(sc, &self.colliders, &self.inv_mass, t, state);
         }
     }
 }

@@ -11,6 +11,7 @@ use crate::core::layout::{
 use crate::core::motion::Motion;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
+use crate::core::self_contact::SelfContactParams;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 
@@ -151,6 +152,9 @@ pub struct Scene {
     /// Surface to draw.
     #[serde(default)]
     pub surface: Option<Surface>,
+    /// Contact of the surface with itself (and, in one scene, of its parts with each other).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub self_collision: Option<SelfContactParams>,
 }
 
 /// One problem found in a scene, with the path of the field (`springs[3].b`).
@@ -379,6 +383,11 @@ impl Scene {
             gravity: self.gravity,
             drag: self.drag,
             wind: self.wind,
+            surface: match (&self.self_collision, &self.surface) {
+                (Some(_), Some(s)) => s.triangles.clone(),
+                _ => vec![],
+            },
+            self_collision: self.self_collision,
         }
     }
 
@@ -401,6 +410,50 @@ impl Scene {
         for c in &mut self.colliders {
             c.motion = c.motion.translated(offset);
         }
+        self
+    }
+
+    /// This scene with `other`'s parts added after its own (particle indices of `other`
+    /// shifted): several bodies stepped as one model, so that with `self_collision` their
+    /// surfaces collide with each other as well as with themselves. Gravity, drag, wind,
+    /// material and self-collision settings are this scene's (`other`'s self-collision when
+    /// this one has none).
+    pub fn append(mut self, other: Scene) -> Self {
+        let off = self.particles.len();
+        let had_uvs = self.surface.as_ref().is_some_and(|s| !s.uvs.is_empty());
+        self.particles.extend(other.particles);
+        self.springs.extend(other.springs.into_iter().map(|mut s| {
+            s.a += off;
+            s.b += off;
+            s
+        }));
+        self.tets.extend(other.tets.into_iter().map(|mut t| {
+            t.vertices = t.vertices.map(|v| v + off);
+            t
+        }));
+        self.motions.extend(other.motions.into_iter().map(|mut m| {
+            m.particle += off;
+            m
+        }));
+        self.forces.extend(other.forces.into_iter().map(|mut f| {
+            f.particle += off;
+            f
+        }));
+        self.colliders.extend(other.colliders);
+        if let Some(o) = other.surface {
+            let mine = self.surface.get_or_insert_with(Surface::default);
+            let other_uvs = !o.uvs.is_empty();
+            if had_uvs || other_uvs {
+                // One texture coordinate per particle: fill what a part lacks with zeros.
+                mine.uvs.resize(off, [0.0; 2]);
+                mine.uvs.extend(o.uvs);
+                mine.uvs.resize(self.particles.len(), [0.0; 2]);
+            }
+            let o32 = off as u32;
+            mine.triangles
+                .extend(o.triangles.into_iter().map(|t| t.map(|i| i + o32)));
+        }
+        self.self_collision = self.self_collision.or(other.self_collision);
         self
     }
 

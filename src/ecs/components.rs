@@ -9,6 +9,7 @@ use crate::core::forces::SpringLaw;
 use crate::core::integrate::IntegratorKind;
 pub use crate::core::integrate::SolverChoice;
 use crate::core::motion::Motion;
+use crate::core::self_contact::SelfContactParams;
 use bevy::prelude::*;
 use bevy::reflect::{impl_reflect, impl_reflect_opaque};
 use parry3d::shape::SharedShape;
@@ -354,6 +355,52 @@ impl Pinned {
 #[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
 #[reflect(Component, Default, Debug)]
 pub struct ExternalForce(pub Vec3);
+
+/// Contact of a body's surface with itself (on the body root): a cloth folding onto itself,
+/// a jelly squeezed against itself, never pass through. The surface is the body's
+/// [`SoftBodySurface`](crate::render::SoftBodySurface) triangles, or the boundary of its tets
+/// when it has none. Proximity impulses with Coulomb friction, continuous collision detection
+/// and rigid impact zones (Bridson, Fedkiw and Anderson 2002; see
+/// [`crate::core::self_contact`]); every state a fixed step delivers is free of
+/// self-intersections. Bodies without it pay nothing.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SelfCollision {
+    /// Thickness (m): parts of the surface closer than this repel. Positive and less than
+    /// half the surface's shortest edge.
+    pub thickness: f32,
+    /// Coulomb friction coefficient between touching parts.
+    pub friction: f32,
+}
+
+impl Default for SelfCollision {
+    fn default() -> Self {
+        let p = SelfContactParams::default();
+        Self {
+            thickness: p.thickness as f32,
+            friction: p.friction as f32,
+        }
+    }
+}
+
+impl SelfCollision {
+    /// The core's settings.
+    pub fn params(&self) -> SelfContactParams {
+        SelfContactParams {
+            thickness: self.thickness as f64,
+            friction: self.friction as f64,
+        }
+    }
+}
+
+impl From<SelfContactParams> for SelfCollision {
+    fn from(p: SelfContactParams) -> Self {
+        Self {
+            thickness: p.thickness as f32,
+            friction: p.friction as f32,
+        }
+    }
+}
 
 /// Wind on a body: air drag `c (w(t) − v)` toward a constant velocity plus a seeded breeze of
 /// three sines. On the body root; the [`GlobalWind`] resource applies where a body has none.

@@ -145,6 +145,9 @@ pub(crate) fn spawn_scene(
         if let Some(w) = scene.wind {
             this.entity(root).insert(SoftBodyWind::from(w));
         }
+        if let Some(sc) = scene.self_collision {
+            this.entity(root).insert(SelfCollision::from(sc));
+        }
         if let Some(s) = &scene.surface {
             this.entity(root).insert(SoftBodySurface {
                 triangles: s.triangles.clone(),

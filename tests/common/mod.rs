@@ -1,6 +1,8 @@
 //! Helpers the integration tests share (not a test itself).
 #![allow(dead_code)]
 
+pub mod intersect;
+
 #[cfg(feature = "plugin")]
 #[allow(unused_imports)] // not every test file uses the app helpers
 pub use plugin::*;

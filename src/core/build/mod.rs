@@ -8,6 +8,7 @@ use crate::core::scene::{MAX_PARTICLES, ParticleDesc, Scene, SpringDesc, SpringK
 mod chain;
 mod cloth;
 mod jelly;
+mod pile;
 mod pyramid;
 mod surface;
 mod tet_body;
@@ -15,6 +16,7 @@ mod wire;
 pub use chain::*;
 pub use cloth::*;
 pub use jelly::*;
+pub use pile::*;
 pub use pyramid::*;
 pub use surface::{SurfaceBody, SurfaceParams, SurfaceStiffness, surface_cloth};
 pub use tet_body::*;

@@ -183,6 +183,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<Pinned>()
             .register_type::<ExternalForce>()
             .register_type::<SoftBodyWind>()
+            .register_type::<SelfCollision>()
             .register_type::<GlobalWind>()
             .register_type::<SoftBodyForceFields>()
             .register_type::<GlobalForceFields>()

@@ -8,6 +8,7 @@ use crate::core::driver::DriverConfig;
 use crate::core::layout::{
     Anchor, BodyLayout, LayoutItem, LayoutParticle, LayoutSpring, LayoutTet,
 };
+use crate::render::SoftBodySurface;
 
 type ParticleItem<'a> = (
     Ref<'a, Particle>,
@@ -21,6 +22,8 @@ struct FemInput<'a, 'w, 's> {
     tets: &'a Query<'w, 's, Ref<'static, Tet>>,
     material: Option<NeoHookean>,
     solver: SolverChoice,
+    /// Self-collision and the surface's triangles (empty: the tets' boundary).
+    self_collision: Option<(SelfCollision, Vec<[u32; 3]>)>,
 }
 
 /// Tets, tets edited this frame, tets and materials removed.
@@ -159,6 +162,20 @@ fn build_body(
         });
         packed_tets.push(te);
     }
+    if let Some((sc, triangles)) = fem.self_collision {
+        layout.self_collision = Some(sc.params());
+        layout.surface = if triangles.is_empty() {
+            crate::core::fem::mesh::boundary_faces(
+                &layout
+                    .tets
+                    .iter()
+                    .map(|t| t.vertices.map(|v| v as u32))
+                    .collect::<Vec<_>>(),
+            )
+        } else {
+            triangles
+        };
+    }
     let (model, state) = layout.build().map_err(|errs| {
         // The first problem, named by the entity behind the packed index.
         let e = &errs[0];
@@ -176,6 +193,9 @@ fn build_body(
                 );
             }
             (LayoutItem::Force(_), _) => "external force",
+            (LayoutItem::Body, "surface") => "SoftBodySurface",
+            (LayoutItem::Body, "self_collision.thickness") => "SelfCollision thickness",
+            (LayoutItem::Body, "self_collision.friction") => "SelfCollision friction",
             (_, "") => "",
             (_, f) => f,
         };
@@ -226,6 +246,8 @@ pub(crate) fn prepare(
             Option<Ref<ElasticMaterial>>,
             Option<Ref<LinearSolverChoice>>,
             Option<&SoftBodyForceFields>,
+            Option<Ref<SelfCollision>>,
+            Option<Ref<SoftBodySurface>>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -239,7 +261,10 @@ pub(crate) fn prepare(
     mut removed_springs: RemovedComponents<Spring>,
     mut removed_pins: RemovedComponents<Pinned>,
     mut removed_forces: RemovedComponents<ExternalForce>,
-    mut removed_winds: RemovedComponents<SoftBodyWind>,
+    (mut removed_winds, mut removed_self): (
+        RemovedComponents<SoftBodyWind>,
+        RemovedComponents<SelfCollision>,
+    ),
     (mut invalid, mut commands): (MessageWriter<SoftBodyInvalid>, Commands),
 ) {
     let frame_dt = fixed.timestep().as_secs_f64();
@@ -249,6 +274,7 @@ pub(crate) fn prepare(
         + removed_pins.read().count()
         + removed_forces.read().count()
         + removed_winds.read().count()
+        + removed_self.read().count()
         + removed_tets.read().count()
         + removed_materials.read().count()
         > 0;
@@ -260,8 +286,16 @@ pub(crate) fn prepare(
     edited.sort_unstable();
     edited.dedup();
     let no_list: &[Entity] = &[];
-    for (body_e, body, mut bs, mut status, plist, slist, wind, (tlist, material, solver, fields)) in
-        &mut bodies
+    for (
+        body_e,
+        body,
+        mut bs,
+        mut status,
+        plist,
+        slist,
+        wind,
+        (tlist, material, solver, fields, self_collision, surface),
+    ) in &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
         let slist = slist.map_or(no_list, |s| s.entities());
@@ -277,6 +311,8 @@ pub(crate) fn prepare(
             || bs.tets.as_slice() != tlist
             || material.as_ref().is_some_and(|m| m.is_changed())
             || solver.as_ref().is_some_and(|m| m.is_changed())
+            || self_collision.as_ref().is_some_and(|c| c.is_changed())
+            || (self_collision.is_some() && surface.as_ref().is_some_and(|s| s.is_changed()))
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
         dirty |= edited.binary_search(&body_e).is_ok();
@@ -331,6 +367,8 @@ pub(crate) fn prepare(
                 tets: &tets,
                 material: material.map(|m| m.0),
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
+                self_collision: self_collision
+                    .map(|c| (*c, surface.map_or(vec![], |s| s.triangles.clone()))),
             };
             match build_body(
                 body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt, fem,

@@ -170,22 +170,7 @@ impl TetMesh {
 
     /// Faces that belong to exactly one tet, wound counter-clockwise seen from outside.
     pub fn boundary(&self) -> Vec<[u32; 3]> {
-        let mut faces: HashMap<[u32; 3], ([u32; 3], u32)> = HashMap::new();
-        for t in &self.tets {
-            let [a, b, c, d] = *t;
-            for f in [[a, c, b], [a, b, d], [a, d, c], [b, c, d]] {
-                let mut key = f;
-                key.sort_unstable();
-                faces.entry(key).or_insert((f, 0)).1 += 1;
-            }
-        }
-        let mut out: Vec<[u32; 3]> = faces
-            .into_values()
-            .filter(|(_, n)| *n == 1)
-            .map(|(f, _)| f)
-            .collect();
-        out.sort_unstable();
-        out
+        boundary_faces(&self.tets)
     }
 
     /// Total volume (m³).
@@ -341,4 +326,25 @@ impl TetMesh {
             ..Default::default()
         }
     }
+}
+
+/// The faces of positively oriented tets that belong to one tet only (the boundary), oriented
+/// outward, sorted.
+pub fn boundary_faces(tets: &[[u32; 4]]) -> Vec<[u32; 3]> {
+    let mut faces: HashMap<[u32; 3], ([u32; 3], u32)> = HashMap::new();
+    for t in tets {
+        let [a, b, c, d] = *t;
+        for f in [[a, c, b], [a, b, d], [a, d, c], [b, c, d]] {
+            let mut key = f;
+            key.sort_unstable();
+            faces.entry(key).or_insert((f, 0)).1 += 1;
+        }
+    }
+    let mut out: Vec<[u32; 3]> = faces
+        .into_values()
+        .filter(|(_, n)| *n == 1)
+        .map(|(f, _)| f)
+        .collect();
+    out.sort_unstable();
+    out
 }

@@ -1,0 +1,1454 @@
+//! Contact of a surface with itself (and, for surfaces of several bodies put together, with
+//! each other): the method of Bridson, Fedkiw and Anderson, *Robust treatment of collisions,
+//! contact and friction for cloth animation* (SIGGRAPH 2002).
+//!
+//! A step moves every surface vertex along a straight line from its start position `x₀` to
+//! its candidate end `x₁` (what the integrator produced), at the average velocity
+//! `u = (x₁ − x₀)/h`. Given a start free of intersections, the pass changes `u` so that the
+//! motion is free of them too, in four stages:
+//!
+//! 1. **Proximity** (§7.1–7.2): point–triangle and edge–edge pairs closer than the thickness
+//!    at the start get an inelastic impulse (their approach stops) with Coulomb friction
+//!    limited by it (`|Δv_t| ≤ μ |Δv_n|`);
+//! 2. **Separation**: pairs closer than the thickness at the end are pushed apart in position
+//!    only (the velocity is not changed, so the push adds no kinetic energy);
+//! 3. **Continuous detection** (§6.3, §7.3): for each pair, the times at which its four points
+//!    are coplanar (roots of a cubic in the step's time) are checked for contact; a collision
+//!    gets an inelastic impulse at that instant and a small separation in position; repeated
+//!    in Gauss–Seidel passes;
+//! 4. **Rigid impact zones** (§7.4), the fail-safe: vertices of pairs still colliding after
+//!    the passes are merged into zones (zones sharing a vertex merge), and each zone moves as a
+//!    rigid body with its linear and angular momentum, until no pair collides. A rigid motion
+//!    of an intersection-free zone keeps it intersection-free, so this ends; if it has not
+//!    within its budget, every free surface vertex stays at its start (which was free of
+//!    intersections), and the pass reports the failure.
+//!
+//! Impulses go to the end velocities as well (the inelastic part and friction; pushes made
+//! for separation move positions only). Every impulse acts on a pair with the pair's effective
+//! mass, so momentum is conserved and the kinetic energy of the pair's relative motion only
+//! decreases. Pinned and prescribed particles (inverse mass zero) are never moved.
+//!
+//! The geometry is computed in `f64` whatever [`Scalar`] is. The broad phase is a spatial hash
+//! of the swept boxes of triangles and edges (Teschner et al., *Optimized spatial hashing for
+//! collision detection of deformable objects*, 2003), rebuilt every pass from the current
+//! motion, so cost stays near-linear in the surface's size.
+
+use crate::math::{Scalar, ToScalar, Vector};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::time::{Duration, Instant};
+
+/// Settings of a surface's contact with itself and with other such surfaces.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SelfContactParams {
+    /// The surface's thickness (m): pairs closer than this repel. Must be positive and less
+    /// than half the shortest surface edge at rest (see [`SelfContactParams::validate`]).
+    pub thickness: f64,
+    /// Coulomb friction coefficient between touching parts of the surface.
+    #[serde(default)]
+    pub friction: f64,
+}
+
+impl Default for SelfContactParams {
+    fn default() -> Self {
+        Self {
+            thickness: 0.005,
+            friction: 0.3,
+        }
+    }
+}
+
+/// The largest thickness, as a fraction of the shortest surface edge at rest. A vertex of a
+/// flat triangulated sheet is `1/√2` of an edge from the diagonal of the square next to it;
+/// a thickness above half an edge would make the sheet at rest repel itself.
+pub const MAX_THICKNESS_PER_EDGE: f64 = 0.5;
+
+impl SelfContactParams {
+    /// Checks the numbers against the surface's shortest rest edge (`None` when there is no
+    /// surface); the problem as `(field, message)`.
+    pub fn validate(&self, shortest_edge: Option<f64>) -> Result<(), (&'static str, String)> {
+        let t = self.thickness;
+        if !(t.is_finite() && t > 0.0) {
+            return Err(("thickness", format!("{t} must be a positive number")));
+        }
+        if !(self.friction.is_finite() && self.friction >= 0.0) {
+            return Err((
+                "friction",
+                format!("{} must be a non-negative number", self.friction),
+            ));
+        }
+        match shortest_edge {
+            None => Err((
+                "thickness",
+                "the body has no surface (triangles) to collide".to_string(),
+            )),
+            Some(e) if t >= MAX_THICKNESS_PER_EDGE * e => Err((
+                "thickness",
+                format!(
+                    "{t} m is too large for the surface's shortest edge ({e:.4} m): it must be less than half of it ({:.4} m)",
+                    MAX_THICKNESS_PER_EDGE * e
+                ),
+            )),
+            Some(_) => Ok(()),
+        }
+    }
+}
+
+/// The triangles of a surface with the edges and vertices derived from them.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ContactSurface {
+    /// Triangles (particle indices).
+    pub triangles: Vec<[u32; 3]>,
+    /// Unique edges, each with the smaller index first.
+    pub edges: Vec<[u32; 2]>,
+    /// Particles on the surface, ascending.
+    pub vertices: Vec<u32>,
+}
+
+impl ContactSurface {
+    /// The surface of the given triangles.
+    pub fn new(triangles: &[[u32; 3]]) -> Self {
+        let mut edges: Vec<[u32; 2]> = triangles
+            .iter()
+            .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+            .map(|[a, b]| [a.min(b), a.max(b)])
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        let mut vertices: Vec<u32> = triangles.iter().flatten().copied().collect();
+        vertices.sort_unstable();
+        vertices.dedup();
+        Self {
+            triangles: triangles.to_vec(),
+            edges,
+            vertices,
+        }
+    }
+
+    /// Several surfaces as one, the particles of surface `k` shifted by `offsets[k]` (the
+    /// surfaces of bodies whose particles are laid end to end).
+    pub fn concat(parts: &[(&ContactSurface, u32)]) -> Self {
+        let mut s = Self::default();
+        for (p, off) in parts {
+            s.triangles
+                .extend(p.triangles.iter().map(|t| t.map(|i| i + off)));
+            s.edges.extend(p.edges.iter().map(|e| e.map(|i| i + off)));
+            s.vertices.extend(p.vertices.iter().map(|i| i + off));
+        }
+        s
+    }
+
+    /// The shortest edge at positions `x` (`None` without edges).
+    pub fn shortest_edge(&self, x: &[DVec3]) -> Option<f64> {
+        self.edges
+            .iter()
+            .map(|e| x[e[0] as usize].distance(x[e[1] as usize]))
+            .min_by(f64::total_cmp)
+    }
+
+    /// The largest particle index plus one.
+    pub fn particle_count(&self) -> usize {
+        self.vertices.last().map_or(0, |&v| v as usize + 1)
+    }
+}
+
+/// What the last pass did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SelfContactReport {
+    /// Candidate pairs the broad phase holds (after the pass).
+    pub candidates: u32,
+    /// Broad-phase searches run (the candidates are kept while every vertex stays within a
+    /// thickness of where it was at the last search).
+    pub searches: u32,
+    /// Pairs closer than the thickness at the start of the step (impulses).
+    pub proximity: u32,
+    /// Pairs pushed apart at the end of the step.
+    pub separated: u32,
+    /// Collisions found by continuous detection (all passes).
+    pub collisions: u32,
+    /// Passes run (each: proximity, separation, continuous detection).
+    pub passes_run: u32,
+    /// Continuous-detection sweeps run (one or more per pass).
+    pub passes: u32,
+    /// Impact zones formed (the fail-safe; usually zero).
+    pub zones: u32,
+    /// The fail-safe ran out of iterations: the surface was held at its start.
+    pub failed: bool,
+    /// Kinetic energy of the surface's free particles before and after the pass (J); summed
+    /// over passes in totals.
+    pub kinetic_before: f64,
+    /// See [`SelfContactReport::kinetic_before`].
+    pub kinetic_after: f64,
+    /// The largest rise of kinetic energy in one pass (J): round-off only, since every
+    /// impulse is inelastic and every zone keeps only its rigid motion.
+    pub kinetic_rise: f64,
+    /// Time in the broad phase.
+    pub broad: Duration,
+    /// Time in the narrow phase and the responses.
+    pub narrow: Duration,
+}
+
+impl SelfContactReport {
+    /// Adds another pass's counts and times.
+    pub fn add(&mut self, o: &SelfContactReport) {
+        self.candidates += o.candidates;
+        self.searches += o.searches;
+        self.proximity += o.proximity;
+        self.separated += o.separated;
+        self.collisions += o.collisions;
+        self.passes += o.passes;
+        self.passes_run += o.passes_run;
+        self.zones += o.zones;
+        self.failed |= o.failed;
+        self.kinetic_before += o.kinetic_before;
+        self.kinetic_after += o.kinetic_after;
+        self.kinetic_rise = self.kinetic_rise.max(o.kinetic_rise);
+        self.broad += o.broad;
+        self.narrow += o.narrow;
+    }
+}
+
+/// A pass runs once the surface's parts may have come this many thicknesses closer since the
+/// last (and at each frame's end).
+pub const PASS_TRAVEL: f64 = 0.5;
+
+/// How far (in thicknesses) each vertex may move, relative to the surface's mean, before the
+/// broad phase searches again.
+pub const BROAD_GROW: f64 = 0.5;
+
+/// Pairs closer than this many thicknesses at a pass's start stop approaching (with
+/// friction). Wider than the thickness the end of a pass restores: a pair held at the
+/// thickness by the position push still gets its normal impulse, and so its friction, in
+/// the next pass.
+pub const PROXIMITY: f64 = 1.5;
+
+/// Mass factor of particles resting on a collider within a pass: a layer lying on another
+/// that lies on the ground pushes that one mostly not at all, instead of pushing it into the
+/// ground for the ground to push back (which makes stacks jitter). Finite, unlike the
+/// infinite mass of shock propagation (Guendelman, Bridson and Fedkiw, *Nonconvex rigid
+/// bodies with stacking*, 2003), so that every impulse still conserves momentum and never
+/// adds kinetic energy: the resting particles move, and an infinitely heavy moving particle
+/// would drive what it touches.
+pub const SUPPORT_MASS: f64 = 16.0;
+
+/// Continuous-detection passes before the impact zones take over.
+pub const CCD_PASSES: u32 = 8;
+/// Impact-zone iterations before the fail-safe gives up and holds the surface.
+pub const ZONE_ITERATIONS: u32 = 64;
+
+/// A surface's contact handler: its surface, settings and the buffers it reuses (a step
+/// allocates nothing once they have grown).
+#[derive(Clone, Debug, Default)]
+pub struct SelfContact {
+    /// The surface.
+    pub surface: ContactSurface,
+    /// Settings.
+    pub params: SelfContactParams,
+    /// What the last pass did.
+    pub last: SelfContactReport,
+    /// Totals since the handler was made.
+    pub total: SelfContactReport,
+    /// Positions at the end of the last pass (the start of the next).
+    start: Vec<Vector>,
+    /// Time since the last pass.
+    since: Scalar,
+    /// A bound on how much closer any two parts of the surface came since the last pass.
+    travel: Scalar,
+    /// Particles resting on colliders (empty: none marked).
+    support: Vec<bool>,
+    s: Scratch,
+}
+
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    p0: Vec<DVec3>,
+    u: Vec<DVec3>,
+    /// End velocities of the surface's particles.
+    vel: Vec<DVec3>,
+    w: Vec<f64>,
+    zone: Vec<u32>,
+    hash: SpatialHash,
+    boxes: Vec<(DVec3, DVec3)>,
+    /// Candidate pairs with their distance at the start of the step.
+    pairs: Vec<(Pair, f64)>,
+    vbox: Vec<(DVec3, DVec3)>,
+    stamp: Vec<u32>,
+    hits: Vec<[u32; 4]>,
+    zone_sum: Vec<ZoneSum>,
+    /// The average velocities the candidate pairs were found with (`None`: none found yet
+    /// this step).
+    vcore: Vec<(DVec3, DVec3)>,
+    /// The surface's mean position at the start of the pass that last searched.
+    broad_ref: DVec3,
+    broad_valid: bool,
+    searches: u32,
+}
+
+/// A point–triangle (`[p, a, b, c]`) or edge–edge (`[a, b, c, d]`) pair.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Pair {
+    PointTriangle(u32, u32),
+    EdgeEdge(u32, u32),
+}
+
+/// Four particles and their weights: the pair's relative position is `Σ wᵢ xᵢ`.
+#[derive(Clone, Copy, Debug)]
+struct Stencil {
+    idx: [u32; 4],
+    wt: [f64; 4],
+}
+
+impl SelfContact {
+    /// A handler for `surface`.
+    pub fn new(surface: ContactSurface, params: SelfContactParams) -> Self {
+        Self {
+            surface,
+            params,
+            ..Default::default()
+        }
+    }
+
+    /// Starts a frame from positions `x` (free of intersections: the end of the last frame).
+    pub fn begin_frame(&mut self, x: &[Vector]) {
+        self.start.clear();
+        self.start.extend_from_slice(x);
+        self.since = 0.0;
+        self.travel = 0.0;
+    }
+
+    /// After a step of length `h` with end velocities `v`: true when a pass is due, i.e. the
+    /// parts of the surface may have come closer by more than [`PASS_TRAVEL`] thicknesses
+    /// since the last one (twice the fastest particle's speed relative to the surface's mean
+    /// velocity, times the time), so every pass sees motions short against the thickness
+    /// whatever the step.
+    pub fn advance(&mut self, h: Scalar, v: &[Vector]) -> bool {
+        if self.start.len() != v.len() {
+            return false;
+        }
+        // Two parts approach at most at |v_a − c| + |v_b − c| for any common velocity c: the
+        // mean one makes a body that falls or slides as a whole count as still.
+        let verts = &self.surface.vertices;
+        let mean =
+            verts.iter().map(|&i| v[i as usize]).sum::<Vector>() / verts.len().max(1) as Scalar;
+        let vmax2 = verts
+            .iter()
+            .map(|&i| (v[i as usize] - mean).length_squared())
+            .fold(0.0, Scalar::max);
+        self.since += h;
+        self.travel += 2.0 * vmax2.sqrt() * h;
+        self.travel as f64 > PASS_TRAVEL * self.params.thickness
+    }
+
+    /// True when steps were taken since the last pass (the frame's end then needs one, so
+    /// every state a frame delivers is free of intersections).
+    pub fn pending(&self) -> bool {
+        self.since > 0.0 && !self.start.is_empty()
+    }
+
+    /// Particles the next pass treats as heavier ([`SUPPORT_MASS`]: resting on a collider): cleared to
+    /// `n` entries for the caller to mark.
+    pub fn support_mut(&mut self, n: usize) -> &mut [bool] {
+        self.support.clear();
+        self.support.resize(n, false);
+        &mut self.support
+    }
+
+    /// A pass over the motion since the last one (from its end to `x`), with the particles
+    /// marked in [`SelfContact::support_mut`] [`SUPPORT_MASS`] times heavier.
+    pub fn pass(&mut self, x: &mut [Vector], v: &mut [Vector], inv_mass: &[Scalar]) {
+        if self.start.len() != x.len() {
+            return;
+        }
+        let start = std::mem::take(&mut self.start);
+        self.resolve(self.since, &start, x, v, inv_mass);
+        self.start = start;
+        self.start.copy_from_slice(x);
+        self.since = 0.0;
+        self.travel = 0.0;
+        self.support.clear();
+    }
+
+    /// Makes the motion from `x0` to `x` over a step of length `h` free of intersections
+    /// (see the module docs): changes `x` and the end velocities `v` of surface particles with
+    /// non-zero inverse mass.
+    pub fn resolve(
+        &mut self,
+        h: Scalar,
+        x0: &[Vector],
+        x: &mut [Vector],
+        v: &mut [Vector],
+        inv_mass: &[Scalar],
+    ) -> SelfContactReport {
+        let h = h as f64;
+        let mut rep = SelfContactReport {
+            passes_run: 1,
+            ..Default::default()
+        };
+        if h.is_nan() || h <= 0.0 || self.surface.triangles.is_empty() {
+            self.last = rep;
+            return rep;
+        }
+        let n = x.len();
+        let s = &mut self.s;
+        s.p0.resize(n, DVec3::ZERO);
+        s.u.resize(n, DVec3::ZERO);
+        s.vel.resize(n, DVec3::ZERO);
+        s.w.resize(n, 0.0);
+        for &i in &self.surface.vertices {
+            let i = i as usize;
+            let p0 = to_d(x0[i]);
+            s.p0[i] = p0;
+            s.u[i] = (to_d(x[i]) - p0) / h;
+            s.vel[i] = to_d(v[i]);
+            s.w[i] = if self.support.get(i).copied().unwrap_or(false) {
+                inv_mass[i] as f64 / SUPPORT_MASS
+            } else {
+                inv_mass[i] as f64
+            };
+        }
+        rep.kinetic_before = kinetic(&self.surface.vertices, &s.w, &s.vel);
+        let ctx = Ctx {
+            surf: &self.surface,
+            thick: self.params.thickness,
+            mu: self.params.friction,
+            h,
+        };
+
+        // 1–2: proximity at the start (impulses) and at the end (position pushes).
+        let t0 = Instant::now();
+        let searches = s.searches;
+        let rebuilt = ctx.ensure_broad(s);
+        let t1 = Instant::now();
+        rep.broad += t1 - t0;
+        if !rebuilt {
+            ctx.start_distances(s);
+        }
+        for k in 0..s.pairs.len() {
+            let (pair, d0) = s.pairs[k];
+            if d0 < PROXIMITY * ctx.thick && ctx.proximity_impulse(s, pair) {
+                rep.proximity += 1;
+            }
+        }
+        for k in 0..s.pairs.len() {
+            let (pair, d0) = s.pairs[k];
+            if ctx.end_separation(s, pair, d0) {
+                rep.separated += 1;
+            }
+        }
+        rep.narrow += t1.elapsed();
+        rep.candidates = s.pairs.len() as u32;
+
+        // 3: continuous detection, Gauss–Seidel passes.
+        let mut clean = false;
+        for _ in 0..CCD_PASSES {
+            let t0 = Instant::now();
+            ctx.ensure_broad(s);
+            let t1 = Instant::now();
+            rep.broad += t1 - t0;
+            rep.passes += 1;
+            let mut found = 0;
+            for k in 0..s.pairs.len() {
+                let (pair, d0) = s.pairs[k];
+                if let Some((tau, st, nrm)) = ctx.ccd(s, pair, d0) {
+                    found += 1;
+                    ctx.collision_impulse(s, &st, nrm, tau);
+                }
+            }
+            rep.narrow += t1.elapsed();
+            rep.collisions += found;
+            if found == 0 {
+                clean = true;
+                break;
+            }
+        }
+
+        // 4: rigid impact zones.
+        if !clean {
+            let t0 = Instant::now();
+            let ok = ctx.impact_zones(s, &mut rep);
+            rep.narrow += t0.elapsed();
+            if !ok {
+                rep.failed = true;
+                for &i in &self.surface.vertices {
+                    let i = i as usize;
+                    if s.w[i] > 0.0 {
+                        s.u[i] = DVec3::ZERO;
+                        s.vel[i] = DVec3::ZERO;
+                    }
+                }
+            }
+        }
+
+        rep.kinetic_after = kinetic(&self.surface.vertices, &s.w, &s.vel);
+        rep.kinetic_rise = (rep.kinetic_after - rep.kinetic_before).max(0.0);
+        for &i in &self.surface.vertices {
+            let i = i as usize;
+            if s.w[i] == 0.0 {
+                continue;
+            }
+            x[i] = from_d(s.p0[i] + s.u[i] * h);
+            v[i] = from_d(s.vel[i]);
+        }
+        rep.searches = s.searches - searches;
+        self.last = rep;
+        self.total.add(&rep);
+        self.total.candidates = rep.candidates;
+        rep
+    }
+}
+
+/// Kinetic energy of the free particles among `verts`.
+fn kinetic(verts: &[u32], w: &[f64], vel: &[DVec3]) -> f64 {
+    verts
+        .iter()
+        .map(|&i| i as usize)
+        .filter(|&i| w[i] > 0.0)
+        .map(|i| 0.5 * vel[i].length_squared() / w[i])
+        .sum()
+}
+
+fn to_d(v: Vector) -> DVec3 {
+    DVec3::new(v.x as f64, v.y as f64, v.z as f64)
+}
+
+fn from_d(v: DVec3) -> Vector {
+    v.to_array().to_scalar()
+}
+
+struct Ctx<'a> {
+    surf: &'a ContactSurface,
+    thick: f64,
+    mu: f64,
+    h: f64,
+}
+
+/// Distance below which continuous detection calls four coplanar points touching (m).
+fn touch_tolerance(thick: f64) -> f64 {
+    (1e-3 * thick).max(1e-7)
+}
+
+impl Ctx<'_> {
+    /// Finds the candidate pairs again unless every surface vertex's path over this pass
+    /// (start and end) still lies in the box it was given when they were last found (its path
+    /// then, grown by the thickness): kept across passes and steps (a Verlet list), so a body
+    /// at rest or moving slowly searches rarely.
+    fn ensure_broad(&self, s: &mut Scratch) -> bool {
+        let h = self.h;
+        let verts = &self.surf.vertices;
+        let nv = verts.len().max(1) as f64;
+        let mean0 = verts.iter().map(|&i| s.p0[i as usize]).sum::<DVec3>() / nv;
+        let mean1 = mean0 + verts.iter().map(|&i| s.u[i as usize]).sum::<DVec3>() * h / nv;
+        if s.broad_valid && s.vcore.len() == s.p0.len() {
+            // The boxes are kept relative to the surface's mean position: a common translation
+            // changes no distance.
+            let (d0, d1) = (mean0 - s.broad_ref, mean1 - s.broad_ref);
+            let inside = verts.iter().all(|&i| {
+                let i = i as usize;
+                let (lo, hi) = s.vcore[i];
+                let (a, b) = (s.p0[i] - d0, s.p0[i] + s.u[i] * h - d1);
+                lo.cmple(a.min(b)).all() && a.max(b).cmple(hi).all()
+            });
+            if inside {
+                return false;
+            }
+        }
+        let grow = BROAD_GROW * self.thick;
+        self.broad_phase(s, grow);
+        s.broad_ref = mean0;
+        self.start_distances(s);
+        // Keep only pairs that can come within the thickness before the next search: each
+        // part stays in its box, so within its path now plus the box's growth (its diagonal).
+        let slack = 2.0 * 3f64.sqrt() * grow;
+        let mut pairs = std::mem::take(&mut s.pairs);
+        pairs.retain(|&(pair, d0)| {
+            let ids = self.stencil_ids(pair);
+            d0 - self.reach(s, pair, ids) - slack < PROXIMITY * self.thick
+        });
+        s.pairs = pairs;
+        s.broad_valid = true;
+        s.searches += 1;
+        true
+    }
+
+    /// Candidate pairs: swept boxes (start to end, grown by the thickness and `grow`) that
+    /// overlap; adjacent pairs (sharing a particle) excluded.
+    fn broad_phase(&self, s: &mut Scratch, grow: f64) {
+        // Each vertex's path grown by `grow` (where it may go before the next search), and
+        // that grown by half the thickness: two sets within the thickness of each other while
+        // they stay in their first boxes have overlapping second boxes.
+        let reach = PROXIMITY * self.thick;
+        let m = 0.5 * reach + grow;
+        let (gd, td) = (DVec3::splat(grow), DVec3::splat(0.5 * reach));
+        s.vbox.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
+        s.vcore.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
+        for &i in &self.surf.vertices {
+            let i = i as usize;
+            let (a, b) = (s.p0[i], s.p0[i] + s.u[i] * self.h);
+            let core = (a.min(b) - gd, a.max(b) + gd);
+            s.vcore[i] = core;
+            s.vbox[i] = (core.0 - td, core.1 + td);
+        }
+        let union = |s: &Scratch, idx: &[u32]| {
+            let mut b = s.vbox[idx[0] as usize];
+            for &i in &idx[1..] {
+                let o = s.vbox[i as usize];
+                b = (b.0.min(o.0), b.1.max(o.1));
+            }
+            b
+        };
+        s.pairs.clear();
+        // Cell size: the mean edge length at the start (the scale of the surface's features)
+        // plus the growth.
+        let ne = self.surf.edges.len().max(1) as f64;
+        let mean_edge = self
+            .surf
+            .edges
+            .iter()
+            .map(|e| s.p0[e[0] as usize].distance(s.p0[e[1] as usize]))
+            .sum::<f64>()
+            / ne;
+        let cell = (mean_edge + 2.0 * m).max(1e-6);
+
+        // Points against triangles.
+        let mut boxes = std::mem::take(&mut s.boxes);
+        boxes.clear();
+        boxes.extend(self.surf.triangles.iter().map(|t| union(s, t)));
+        s.hash.build(&boxes, cell);
+        s.stamp.clear();
+        s.stamp
+            .resize(boxes.len().max(self.surf.edges.len()), u32::MAX);
+        let tris = &self.surf.triangles;
+        for (q, &p) in self.surf.vertices.iter().enumerate() {
+            let b = s.vbox[p as usize];
+            let pairs = &mut s.pairs;
+            s.hash.query(b, &boxes, &mut s.stamp, q as u32, |t| {
+                if !tris[t as usize].contains(&p) {
+                    pairs.push((Pair::PointTriangle(p, t), 0.0));
+                }
+            });
+        }
+        // Edges against edges.
+        boxes.clear();
+        boxes.extend(self.surf.edges.iter().map(|e| union(s, e)));
+        s.hash.build(&boxes, cell);
+        s.stamp.iter_mut().for_each(|x| *x = u32::MAX);
+        let edges = &self.surf.edges;
+        for (q, e) in edges.iter().enumerate() {
+            let b = boxes[q];
+            let pairs = &mut s.pairs;
+            s.hash.query(b, &boxes, &mut s.stamp, q as u32, |f| {
+                let g = edges[f as usize];
+                if (f as usize) > q && !g.contains(&e[0]) && !g.contains(&e[1]) {
+                    pairs.push((Pair::EdgeEdge(q as u32, f), 0.0));
+                }
+            });
+        }
+        s.boxes = boxes;
+    }
+
+    /// Each candidate pair's distance at the start of the pass (fixed for the pass: the start
+    /// does not move).
+    fn start_distances(&self, s: &mut Scratch) {
+        for k in 0..s.pairs.len() {
+            let pair = s.pairs[k].0;
+            let ids = self.stencil_ids(pair);
+            let y = Self::positions(ids, |i| s.p0[i]);
+            s.pairs[k].1 = Self::closest(pair, y).1;
+        }
+    }
+
+    /// How much closer than `d0` the pair's parts can come over the step: the largest travel
+    /// of a point of the first part plus that of the second (a bound: the closest points move
+    /// no more than the fastest vertex of their part).
+    fn reach(&self, s: &Scratch, pair: Pair, ids: [u32; 4]) -> f64 {
+        let travel = |i: u32| (s.u[i as usize] * self.h).length_squared();
+        let (a, b) = match pair {
+            Pair::PointTriangle(..) => (
+                travel(ids[0]),
+                travel(ids[1]).max(travel(ids[2])).max(travel(ids[3])),
+            ),
+            Pair::EdgeEdge(..) => (
+                travel(ids[0]).max(travel(ids[1])),
+                travel(ids[2]).max(travel(ids[3])),
+            ),
+        };
+        a.sqrt() + b.sqrt()
+    }
+
+    fn stencil_ids(&self, pair: Pair) -> [u32; 4] {
+        match pair {
+            Pair::PointTriangle(p, t) => {
+                let t = self.surf.triangles[t as usize];
+                [p, t[0], t[1], t[2]]
+            }
+            Pair::EdgeEdge(e, f) => {
+                let (e, f) = (self.surf.edges[e as usize], self.surf.edges[f as usize]);
+                [e[0], e[1], f[0], f[1]]
+            }
+        }
+    }
+
+    /// The pair's closest points at positions `y` (the pair's four points): the stencil
+    /// weights, the distance and the unit normal from the second part to the first.
+    fn closest(pair: Pair, y: [DVec3; 4]) -> ([f64; 4], f64, DVec3) {
+        let (wt, d) = match pair {
+            Pair::PointTriangle(..) => {
+                let b = closest_on_triangle(y[0], y[1], y[2], y[3]);
+                let q = y[1] * b[0] + y[2] * b[1] + y[3] * b[2];
+                ([1.0, -b[0], -b[1], -b[2]], y[0] - q)
+            }
+            Pair::EdgeEdge(..) => {
+                let (a, b) = closest_between_segments(y[0], y[1], y[2], y[3]);
+                let p = y[0].lerp(y[1], a);
+                let q = y[2].lerp(y[3], b);
+                ([1.0 - a, a, b - 1.0, -b], p - q)
+            }
+        };
+        let dist = d.length();
+        let nrm = if dist > 1e-12 {
+            d / dist
+        } else {
+            // Touching: the plane's normal, either side.
+            let c = match pair {
+                Pair::PointTriangle(..) => (y[2] - y[1]).cross(y[3] - y[1]),
+                Pair::EdgeEdge(..) => (y[1] - y[0]).cross(y[3] - y[2]),
+            };
+            c.try_normalize().unwrap_or(DVec3::Y)
+        };
+        (wt, dist, nrm)
+    }
+
+    fn relative(st: &Stencil, v: &[DVec3]) -> DVec3 {
+        (0..4).map(|k| v[st.idx[k] as usize] * st.wt[k]).sum()
+    }
+
+    /// Applies the relative velocity change `dvr` (along any direction) to the pair in
+    /// `field` (average or end velocities) with the pair's effective mass.
+    fn apply(w: &[f64], field: &mut [DVec3], st: &Stencil, dvr: DVec3) {
+        let wm: f64 = (0..4)
+            .map(|k| st.wt[k] * st.wt[k] * w[st.idx[k] as usize])
+            .sum();
+        if wm <= 0.0 {
+            return;
+        }
+        let j = dvr / wm;
+        for k in 0..4 {
+            let i = st.idx[k] as usize;
+            field[i] += j * (st.wt[k] * w[i]);
+        }
+    }
+
+    /// An inelastic impulse in `field` that stops the pair's approach along `nrm`, with
+    /// Coulomb friction limited by it (`|Δv_t| ≤ μ Δv_n`); nothing when it is not
+    /// approaching. It never adds kinetic energy.
+    fn stop_approach(w: &[f64], field: &mut [DVec3], st: &Stencil, nrm: DVec3, mu: f64) {
+        let vr = Self::relative(st, field);
+        let vn = vr.dot(nrm);
+        if vn >= 0.0 {
+            return;
+        }
+        let dvn = -vn;
+        let vt = vr - nrm * vn;
+        let vt_len = vt.length();
+        let dvt = if vt_len > 0.0 {
+            -vt * (mu * dvn / vt_len).min(1.0)
+        } else {
+            DVec3::ZERO
+        };
+        Self::apply(w, field, st, nrm * dvn + dvt);
+    }
+
+    /// The pair stops approaching, in the average velocities (the motion over the step) and
+    /// in the end velocities, each by its own inelastic impulse: a pair whose end velocities
+    /// already separate is left as it is.
+    fn inelastic(&self, s: &mut Scratch, st: &Stencil, nrm: DVec3) {
+        Self::stop_approach(&s.w, &mut s.u, st, nrm, self.mu);
+        Self::stop_approach(&s.w, &mut s.vel, st, nrm, self.mu);
+    }
+
+    fn positions(ids: [u32; 4], f: impl Fn(usize) -> DVec3) -> [DVec3; 4] {
+        ids.map(|i| f(i as usize))
+    }
+
+    fn proximity_impulse(&self, s: &mut Scratch, pair: Pair) -> bool {
+        let ids = self.stencil_ids(pair);
+        let y = Self::positions(ids, |i| s.p0[i]);
+        let (wt, d, nrm) = Self::closest(pair, y);
+        if d >= PROXIMITY * self.thick || !Self::proper(pair, &wt) {
+            return false;
+        }
+        let st = Stencil { idx: ids, wt };
+        self.inelastic(s, &st, nrm);
+        true
+    }
+
+    /// Whether a proximity is the pair's own: any point–triangle pair, and edges whose
+    /// closest points are interior to both. Otherwise an end of an edge is nearest and a
+    /// point–triangle pair of that end covers it; and the direction between the points, tilted
+    /// off the surfaces' normal for the nearly parallel edges of two layers lying on each
+    /// other, would push sideways and make the layers' stiff in-plane springs ring (measured:
+    /// it doubles the kinetic energy of two resting cloths).
+    fn proper(pair: Pair, wt: &[f64; 4]) -> bool {
+        const END: f64 = 1e-6;
+        match pair {
+            Pair::PointTriangle(..) => true,
+            Pair::EdgeEdge(..) => {
+                let (a, b) = (wt[1], -wt[3]);
+                a > END && a < 1.0 - END && b > END && b < 1.0 - END
+            }
+        }
+    }
+
+    fn end_separation(&self, s: &mut Scratch, pair: Pair, d0: f64) -> bool {
+        let ids = self.stencil_ids(pair);
+        if d0 - self.reach(s, pair, ids) >= self.thick {
+            return false;
+        }
+        let y = Self::positions(ids, |i| s.p0[i] + s.u[i] * self.h);
+        let (wt, d, nrm) = Self::closest(pair, y);
+        if d >= self.thick || !Self::proper(pair, &wt) {
+            return false;
+        }
+        // Only when the pair is on the same side as at the start (otherwise it crossed: the
+        // continuous detection deals with it).
+        let y0 = Self::positions(ids, |i| s.p0[i]);
+        let r0: DVec3 = (0..4).map(|k| y0[k] * wt[k]).sum();
+        if r0.dot(nrm) < 0.0 {
+            return false;
+        }
+        let st = Stencil { idx: ids, wt };
+        Self::apply(&s.w, &mut s.u, &st, nrm * ((self.thick - d) / self.h));
+        true
+    }
+
+    /// The earliest contact of the pair over the step: (fraction of the step, the stencil at
+    /// that instant, the unit normal).
+    fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
+        let ids = self.stencil_ids(pair);
+        let tol = touch_tolerance(self.thick);
+        if d0 - self.reach(s, pair, ids) > tol {
+            return None;
+        }
+        let x0 = Self::positions(ids, |i| s.p0[i]);
+        let dx = Self::positions(ids, |i| s.u[i] * self.h);
+        // Coplanarity of the four points along their paths: det(e₁, e₂, e₃) = 0 with eₖ linear
+        // in τ; for a point–triangle pair e = (b−a, c−a, p−a), for edges (b−a, d−c, c−a).
+        let (ea, eb, ec, da, db, dc) = match pair {
+            Pair::PointTriangle(..) => (
+                x0[2] - x0[1],
+                x0[3] - x0[1],
+                x0[0] - x0[1],
+                dx[2] - dx[1],
+                dx[3] - dx[1],
+                dx[0] - dx[1],
+            ),
+            Pair::EdgeEdge(..) => (
+                x0[1] - x0[0],
+                x0[3] - x0[2],
+                x0[2] - x0[0],
+                dx[1] - dx[0],
+                dx[3] - dx[2],
+                dx[2] - dx[0],
+            ),
+        };
+        let det = |a: DVec3, b: DVec3, c: DVec3| a.cross(b).dot(c);
+        let c0 = det(ea, eb, ec);
+        let c1 = det(da, eb, ec) + det(ea, db, ec) + det(ea, eb, dc);
+        let c2 = det(da, db, ec) + det(da, eb, dc) + det(ea, db, dc);
+        let c3 = det(da, db, dc);
+        let mut found = None;
+        cubic_roots_in_unit(c3, c2, c1, c0, |tau| {
+            if found.is_some() {
+                return;
+            }
+            let y = [0, 1, 2, 3].map(|k| x0[k] + dx[k] * tau);
+            let (wt, d, nrm) = Self::closest(pair, y);
+            if d <= tol {
+                found = Some((tau, Stencil { idx: ids, wt }, nrm));
+            }
+        });
+        let (tau, st, mut nrm) = found?;
+        // Orient the normal against the approach.
+        let vr = Self::relative(&st, &s.u);
+        if vr.dot(nrm) > 0.0 {
+            nrm = -nrm;
+        }
+        Some((tau, st, nrm))
+    }
+
+    /// Response to a collision at fraction `tau` of the step: the approach stops (with
+    /// friction), and the pair separates by a tenth of the thickness by the step's end in
+    /// position only.
+    fn collision_impulse(&self, s: &mut Scratch, st: &Stencil, nrm: DVec3, tau: f64) {
+        self.inelastic(s, st, nrm);
+        let remaining = ((1.0 - tau) * self.h).max(1e-3 * self.h);
+        let sep = 0.1 * self.thick;
+        Self::apply(&s.w, &mut s.u, st, nrm * (sep / remaining));
+    }
+
+    /// All pairs colliding over the step (with the current motion), as their particles.
+    fn collisions(&self, s: &mut Scratch) {
+        self.ensure_broad(s);
+        let mut hits = std::mem::take(&mut s.hits);
+        hits.clear();
+        for k in 0..s.pairs.len() {
+            let (pair, d0) = s.pairs[k];
+            if self.ccd(s, pair, d0).is_some() {
+                hits.push(self.stencil_ids(pair));
+            }
+        }
+        s.hits = hits;
+    }
+
+    /// The fail-safe; true when the motion ends free of collisions.
+    fn impact_zones(&self, s: &mut Scratch, rep: &mut SelfContactReport) -> bool {
+        let n = s.p0.len();
+        s.zone.clear();
+        s.zone.extend(0..n as u32);
+        for _ in 0..ZONE_ITERATIONS {
+            let t0 = Instant::now();
+            self.collisions(s);
+            rep.broad += t0.elapsed();
+            if s.hits.is_empty() {
+                return true;
+            }
+            for k in 0..s.hits.len() {
+                let ids = s.hits[k];
+                for w in 1..4 {
+                    union(&mut s.zone, ids[0], ids[w]);
+                }
+            }
+            rep.zones += self.rigidify(s);
+        }
+        self.collisions(s);
+        s.hits.is_empty()
+    }
+
+    /// Moves every zone of more than one particle rigidly with its momentum and angular
+    /// momentum (about its centre of mass at the start); returns the number of zones.
+    fn rigidify(&self, s: &mut Scratch) -> u32 {
+        let n = s.p0.len();
+        s.zone_sum.clear();
+        s.zone_sum.resize(n, ZoneSum::default());
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            let z = &mut s.zone_sum[r];
+            z.count += 1;
+            if s.w[i] == 0.0 {
+                z.fixed += 1;
+                z.fixed_u += s.u[i];
+                z.fixed_v += s.vel[i];
+                continue;
+            }
+            let m = 1.0 / s.w[i];
+            z.m += m;
+            z.mx += s.p0[i] * m;
+            z.mu += s.u[i] * m;
+        }
+        let mut zones = 0;
+        for r in 0..n {
+            if s.zone_sum[r].count > 1 && s.zone_sum[r].m > 0.0 {
+                zones += 1;
+                let z = &mut s.zone_sum[r];
+                z.xc = z.mx / z.m;
+                z.uc = z.mu / z.m;
+            }
+        }
+        // Angular momentum and inertia about each zone's centre.
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
+                continue;
+            }
+            let m = 1.0 / s.w[i];
+            let z = &mut s.zone_sum[r];
+            let d = s.p0[i] - z.xc;
+            z.l += d.cross(s.u[i] - z.uc) * m;
+            z.inertia += glam::DMat3::from_diagonal(DVec3::splat(d.length_squared()) * m)
+                - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z) * m;
+        }
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            let z = s.zone_sum[r];
+            if s.w[i] == 0.0 || z.count < 2 {
+                continue;
+            }
+            let d = s.p0[i] - z.xc;
+            let new_end = if z.fixed > 0 {
+                // A zone holding pinned or prescribed particles translates with them.
+                s.p0[i] + z.fixed_u / z.fixed as f64 * self.h
+            } else {
+                let omega = solve_inertia(z.inertia, z.l);
+                let turn = glam::DQuat::from_scaled_axis(omega * self.h);
+                z.xc + z.uc * self.h + turn * d
+            };
+            s.u[i] = (new_end - s.p0[i]) / self.h;
+        }
+        // End velocities: each zone's rigid part (momentum and angular momentum about its
+        // centre at the end kept; the relative motion, and only its energy, removed).
+        for r in 0..n {
+            let z = &mut s.zone_sum[r];
+            (z.m, z.mx, z.mu, z.l, z.inertia) = (
+                0.0,
+                DVec3::ZERO,
+                DVec3::ZERO,
+                DVec3::ZERO,
+                glam::DMat3::ZERO,
+            );
+        }
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
+                continue;
+            }
+            let m = 1.0 / s.w[i];
+            let z = &mut s.zone_sum[r];
+            z.m += m;
+            z.mx += (s.p0[i] + s.u[i] * self.h) * m;
+            z.mu += s.vel[i] * m;
+        }
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
+                continue;
+            }
+            let m = 1.0 / s.w[i];
+            let z = &mut s.zone_sum[r];
+            let (xc, vc) = (z.mx / z.m, z.mu / z.m);
+            let d = s.p0[i] + s.u[i] * self.h - xc;
+            z.l += d.cross(s.vel[i] - vc) * m;
+            z.inertia += glam::DMat3::from_diagonal(DVec3::splat(d.length_squared()) * m)
+                - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z) * m;
+        }
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            let z = s.zone_sum[r];
+            if s.w[i] == 0.0 || z.count < 2 {
+                continue;
+            }
+            s.vel[i] = if z.fixed > 0 {
+                z.fixed_v / z.fixed as f64
+            } else {
+                let (xc, vc) = (z.mx / z.m, z.mu / z.m);
+                let omega = solve_inertia(z.inertia, z.l);
+                vc + omega.cross(s.p0[i] + s.u[i] * self.h - xc)
+            };
+        }
+        zones
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct ZoneSum {
+    count: u32,
+    fixed: u32,
+    fixed_u: DVec3,
+    fixed_v: DVec3,
+    m: f64,
+    mx: DVec3,
+    mu: DVec3,
+    xc: DVec3,
+    uc: DVec3,
+    l: DVec3,
+    inertia: glam::DMat3,
+}
+
+fn solve_inertia(i: glam::DMat3, l: DVec3) -> DVec3 {
+    // Zones of collinear particles have a singular inertia: regularize by a tiny fraction of
+    // its trace (the spin about the line is then zero).
+    let tr = i.x_axis.x + i.y_axis.y + i.z_axis.z;
+    let reg = i + glam::DMat3::from_diagonal(DVec3::splat(1e-9 * tr.max(1e-30)));
+    let det = reg.determinant();
+    if det.abs() > 0.0 && det.is_finite() {
+        reg.inverse() * l
+    } else {
+        DVec3::ZERO
+    }
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        let p = parent[parent[i as usize] as usize];
+        parent[i as usize] = p;
+        i = p;
+    }
+    i
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        // The smaller index is the root: deterministic.
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        parent[hi as usize] = lo;
+    }
+}
+
+/// Calls `f` with the roots in `[0, 1]` of `c₃τ³ + c₂τ² + c₁τ + c₀`, ascending: the interval
+/// is split at the cubic's critical points and each monotone piece with a sign change (or a
+/// zero end) is bisected to round-off.
+pub fn cubic_roots_in_unit(c3: f64, c2: f64, c1: f64, c0: f64, mut f: impl FnMut(f64)) {
+    let p = |t: f64| ((c3 * t + c2) * t + c1) * t + c0;
+    // Critical points: 3c₃τ² + 2c₂τ + c₁ = 0.
+    let mut cuts = [0.0, 1.0, 1.0, 1.0];
+    let mut nc = 1;
+    let (a, b, c) = (3.0 * c3, 2.0 * c2, c1);
+    let scale = a.abs().max(b.abs()).max(c.abs());
+    if scale > 0.0 {
+        if a.abs() > 1e-12 * scale {
+            let disc = b * b - 4.0 * a * c;
+            if disc >= 0.0 {
+                let sq = disc.sqrt();
+                let q = -0.5 * (b + b.signum() * sq);
+                let mut r = [q / a, if q != 0.0 { c / q } else { q / a }];
+                r.sort_by(f64::total_cmp);
+                for t in r {
+                    if t > 0.0 && t < 1.0 {
+                        cuts[nc] = t;
+                        nc += 1;
+                    }
+                }
+            }
+        } else if b.abs() > 0.0 {
+            let t = -c / b;
+            if t > 0.0 && t < 1.0 {
+                cuts[nc] = t;
+                nc += 1;
+            }
+        }
+    }
+    cuts[nc] = 1.0;
+    cuts[..=nc].sort_by(f64::total_cmp);
+    let mut last = f64::NEG_INFINITY;
+    let mut emit = |t: f64, f: &mut dyn FnMut(f64)| {
+        if t > last + 1e-12 {
+            last = t;
+            f(t);
+        }
+    };
+    for k in 0..nc {
+        let (mut lo, mut hi) = (cuts[k], cuts[k + 1]);
+        let (flo, fhi) = (p(lo), p(hi));
+        if flo == 0.0 {
+            emit(lo, &mut f);
+            continue;
+        }
+        if fhi == 0.0 {
+            emit(hi, &mut f);
+            continue;
+        }
+        if (flo < 0.0) == (fhi < 0.0) {
+            continue;
+        }
+        let neg_lo = flo < 0.0;
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            let fm = p(mid);
+            if (fm < 0.0) == neg_lo {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+            if hi - lo < 1e-13 {
+                break;
+            }
+        }
+        // The earlier end of the bracket: a contact is never reported late.
+        emit(lo, &mut f);
+    }
+}
+
+/// Barycentric weights of the point of triangle `abc` closest to `p` (Ericson, *Real-Time
+/// Collision Detection*, §5.1.5).
+pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = va + vb + vc;
+    if denom.is_nan() || denom == 0.0 {
+        // Degenerate triangle: the nearest of its vertices.
+        let da = ap.length_squared();
+        let db = bp.length_squared();
+        let dc = cp.length_squared();
+        return if da <= db && da <= dc {
+            [1.0, 0.0, 0.0]
+        } else if db <= dc {
+            [0.0, 1.0, 0.0]
+        } else {
+            [0.0, 0.0, 1.0]
+        };
+    }
+    let v = vb / denom;
+    let w = vc / denom;
+    [1.0 - v - w, v, w]
+}
+
+/// Parameters `(s, t)` of the closest points `p₁ + s(q₁ − p₁)` and `p₂ + t(q₂ − p₂)` of two
+/// segments (Ericson, *Real-Time Collision Detection*, §5.1.9).
+pub fn closest_between_segments(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (f64, f64) {
+    let d1 = q1 - p1;
+    let d2 = q2 - p2;
+    let r = p1 - p2;
+    let a = d1.length_squared();
+    let e = d2.length_squared();
+    let f = d2.dot(r);
+    let eps = 1e-30;
+    if a <= eps && e <= eps {
+        return (0.0, 0.0);
+    }
+    let (s, t);
+    if a <= eps {
+        s = 0.0;
+        t = (f / e).clamp(0.0, 1.0);
+    } else {
+        let c = d1.dot(r);
+        if e <= eps {
+            t = 0.0;
+            s = (-c / a).clamp(0.0, 1.0);
+        } else {
+            let b = d1.dot(d2);
+            let denom = a * e - b * b;
+            let mut s0 = if denom > 1e-14 * a * e {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t0 = (b * s0 + f) / e;
+            if t0 < 0.0 {
+                t0 = 0.0;
+                s0 = (-c / a).clamp(0.0, 1.0);
+            } else if t0 > 1.0 {
+                t0 = 1.0;
+                s0 = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            s = s0;
+            t = t0;
+        }
+    }
+    (s, t)
+}
+
+/// A spatial hash of boxes, built by counting sort into reused buffers.
+#[derive(Clone, Debug, Default)]
+struct SpatialHash {
+    cell: f64,
+    start: Vec<u32>,
+    items: Vec<u32>,
+    /// Boxes spanning too many cells: tested against every query.
+    big: Vec<u32>,
+}
+
+/// A box spanning more cells than this goes to the hash's list of big boxes.
+const MAX_CELLS: i64 = 64;
+
+impl SpatialHash {
+    fn cells(&self, b: (DVec3, DVec3)) -> Option<([i64; 3], [i64; 3])> {
+        let lo = (b.0 / self.cell).floor();
+        let hi = (b.1 / self.cell).floor();
+        let span = hi - lo + DVec3::ONE;
+        // Counted in f64 first: a huge box must not overflow the integer product.
+        if !(lo.is_finite() && hi.is_finite()) || span.x * span.y * span.z > MAX_CELLS as f64 {
+            return None;
+        }
+        Some((
+            [lo.x as i64, lo.y as i64, lo.z as i64],
+            [hi.x as i64, hi.y as i64, hi.z as i64],
+        ))
+    }
+
+    fn slot(&self, c: [i64; 3]) -> usize {
+        // Teschner et al.'s primes, then a 64-bit finalizer (splitmix64's) so the low bits
+        // the mask keeps depend on every coordinate's bits.
+        let mut h = ((c[0].wrapping_mul(73_856_093))
+            ^ (c[1].wrapping_mul(19_349_663))
+            ^ (c[2].wrapping_mul(83_492_791))) as u64;
+        h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        h ^= h >> 31;
+        // `start` has a power of two of slots plus an end marker.
+        (h & (self.start.len() as u64 - 2)) as usize
+    }
+
+    fn each_cell(r: ([i64; 3], [i64; 3]), mut f: impl FnMut([i64; 3])) {
+        for x in r.0[0]..=r.1[0] {
+            for y in r.0[1]..=r.1[1] {
+                for z in r.0[2]..=r.1[2] {
+                    f([x, y, z]);
+                }
+            }
+        }
+    }
+
+    fn build(&mut self, boxes: &[(DVec3, DVec3)], cell: f64) {
+        self.cell = cell;
+        let slots = (2 * boxes.len()).next_power_of_two().max(16) + 1;
+        self.start.clear();
+        self.start.resize(slots, 0);
+        self.big.clear();
+        let mut total = 0usize;
+        for (k, b) in boxes.iter().enumerate() {
+            match self.cells(*b) {
+                Some(r) => Self::each_cell(r, |c| {
+                    let s = self.slot(c);
+                    self.start[s] += 1;
+                    total += 1;
+                }),
+                None => self.big.push(k as u32),
+            }
+        }
+        // Prefix sums: `start[s]` is the end of slot `s`'s run; filling walks it back.
+        let mut acc = 0;
+        for s in self.start.iter_mut() {
+            acc += *s;
+            *s = acc;
+        }
+        self.items.clear();
+        self.items.resize(total, 0);
+        for (k, b) in boxes.iter().enumerate() {
+            if let Some(r) = self.cells(*b) {
+                Self::each_cell(r, |c| {
+                    let s = self.slot(c);
+                    self.start[s] -= 1;
+                    self.items[self.start[s] as usize] = k as u32;
+                });
+            }
+        }
+        // Now `start[s]` is the beginning of slot `s`'s run; the last slot marks the end.
+        let last = self.start.len() - 1;
+        self.start[last] = total as u32;
+    }
+
+    /// Calls `f` once with every stored box overlapping `b` (`stamp` marks boxes already seen
+    /// by query `q`).
+    fn query(
+        &self,
+        b: (DVec3, DVec3),
+        boxes: &[(DVec3, DVec3)],
+        stamp: &mut [u32],
+        q: u32,
+        mut f: impl FnMut(u32),
+    ) {
+        let mut visit = |k: u32, stamp: &mut [u32]| {
+            if stamp[k as usize] == q {
+                return;
+            }
+            stamp[k as usize] = q;
+            let o = boxes[k as usize];
+            if o.0.cmple(b.1).all() && b.0.cmple(o.1).all() {
+                f(k);
+            }
+        };
+        for &k in &self.big {
+            visit(k, stamp);
+        }
+        match self.cells(b) {
+            Some(r) => Self::each_cell(r, |c| {
+                let s = self.slot(c);
+                let (lo, hi) = (self.start[s] as usize, self.start[s + 1] as usize);
+                for &k in &self.items[lo..hi] {
+                    visit(k, stamp);
+                }
+            }),
+            None => {
+                for k in 0..boxes.len() as u32 {
+                    visit(k, stamp);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cubic_roots_match_a_factored_cubic() {
+        // (τ − 0.2)(τ − 0.5)(τ − 0.9) = τ³ − 1.6τ² + 0.73τ − 0.09.
+        let mut r = vec![];
+        cubic_roots_in_unit(1.0, -1.6, 0.73, -0.09, |t| r.push(t));
+        assert_eq!(r.len(), 3, "{r:?}");
+        for (a, b) in r.iter().zip([0.2, 0.5, 0.9]) {
+            assert!((a - b).abs() < 1e-12, "{r:?}");
+        }
+        // A double root at 0.5 (tangency) and one outside: τ (τ−0.5)² − … shifted: (τ−0.5)²(τ−2).
+        let mut r = vec![];
+        cubic_roots_in_unit(1.0, -3.0, 2.25, -0.5, |t| r.push(t));
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!((r[0] - 0.5).abs() < 1e-6, "{r:?}");
+    }
+
+    #[test]
+    fn closest_points_against_brute_force() {
+        let mut seed = 12345u64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        for _ in 0..200 {
+            let v = [0; 5].map(|_| DVec3::new(rnd(), rnd(), rnd()));
+            let b = closest_on_triangle(v[0], v[1], v[2], v[3]);
+            let q = v[1] * b[0] + v[2] * b[1] + v[3] * b[2];
+            let d = v[0].distance(q);
+            let n = 200;
+            for i in 0..=n {
+                for j in 0..=(n - i) {
+                    let (s, t) = (i as f64 / n as f64, j as f64 / n as f64);
+                    let g = v[1] + (v[2] - v[1]) * s + (v[3] - v[1]) * t;
+                    assert!(v[0].distance(g) >= d - 1e-12);
+                }
+            }
+            let (s, t) = closest_between_segments(v[0], v[1], v[2], v[3]);
+            let d = v[0].lerp(v[1], s).distance(v[2].lerp(v[3], t));
+            for i in 0..=n {
+                for j in 0..=n {
+                    let g = v[0]
+                        .lerp(v[1], i as f64 / n as f64)
+                        .distance(v[2].lerp(v[3], j as f64 / n as f64));
+                    assert!(g >= d - 1e-12);
+                }
+            }
+        }
+    }
+}
