@@ -471,6 +471,12 @@ mod plugin {
             app.update();
             sim.advance_frame().unwrap();
         }
+        let status = app.world().get::<SoftBodyStatus>(e).unwrap();
+        // A pass at least at every frame's end.
+        assert!(
+            status.contact_passes >= 1 && !status.contact_failed,
+            "{status:?}"
+        );
         let bs = app.world().get::<BodySim>(e).unwrap();
         let plugin = bs.simulation().unwrap();
         let rep = plugin.system.self_contact.as_ref().unwrap().total;

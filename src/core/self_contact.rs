@@ -175,6 +175,8 @@ pub struct SelfContactReport {
     pub zones: u32,
     /// The fail-safe ran out of iterations: the surface was held at its start.
     pub failed: bool,
+    /// Passes whose fail-safe ran out of iterations (summed in totals).
+    pub failures: u32,
     /// Kinetic energy of the surface's free particles before and after the pass (J); summed
     /// over passes in totals.
     pub kinetic_before: f64,
@@ -201,6 +203,7 @@ impl SelfContactReport {
         self.passes_run += o.passes_run;
         self.zones += o.zones;
         self.failed |= o.failed;
+        self.failures += o.failures;
         self.kinetic_before += o.kinetic_before;
         self.kinetic_after += o.kinetic_after;
         self.kinetic_rise = self.kinetic_rise.max(o.kinetic_rise);
@@ -470,6 +473,7 @@ impl SelfContact {
             rep.narrow += t0.elapsed();
             if !ok {
                 rep.failed = true;
+                rep.failures = 1;
                 for &i in &self.surface.vertices {
                     let i = i as usize;
                     if s.w[i] > 0.0 {
@@ -622,7 +626,7 @@ impl Ctx<'_> {
         for (q, &p) in self.surf.vertices.iter().enumerate() {
             let b = s.vbox[p as usize];
             let pairs = &mut s.pairs;
-            s.hash.query(b, &boxes, &mut s.stamp, q as u32, |t| {
+            s.hash.query(b, &boxes, &mut s.stamp, q as u32, 0, |t| {
                 if !tris[t as usize].contains(&p) {
                     pairs.push((Pair::PointTriangle(p, t), 0.0));
                 }
@@ -637,12 +641,13 @@ impl Ctx<'_> {
         for (q, e) in edges.iter().enumerate() {
             let b = boxes[q];
             let pairs = &mut s.pairs;
-            s.hash.query(b, &boxes, &mut s.stamp, q as u32, |f| {
-                let g = edges[f as usize];
-                if (f as usize) > q && !g.contains(&e[0]) && !g.contains(&e[1]) {
-                    pairs.push((Pair::EdgeEdge(q as u32, f), 0.0));
-                }
-            });
+            s.hash
+                .query(b, &boxes, &mut s.stamp, q as u32, q as u32 + 1, |f| {
+                    let g = edges[f as usize];
+                    if !g.contains(&e[0]) && !g.contains(&e[1]) {
+                        pairs.push((Pair::EdgeEdge(q as u32, f), 0.0));
+                    }
+                });
         }
         s.boxes = boxes;
     }
@@ -1359,16 +1364,20 @@ impl SpatialHash {
 
     /// Calls `f` once with every stored box overlapping `b` (`stamp` marks boxes already seen
     /// by query `q`).
+    /// Only boxes with an index of at least `from` are visited (a query of a set against
+    /// itself takes each pair once).
+    #[allow(clippy::too_many_arguments)]
     fn query(
         &self,
         b: (DVec3, DVec3),
         boxes: &[(DVec3, DVec3)],
         stamp: &mut [u32],
         q: u32,
+        from: u32,
         mut f: impl FnMut(u32),
     ) {
         let mut visit = |k: u32, stamp: &mut [u32]| {
-            if stamp[k as usize] == q {
+            if k < from || stamp[k as usize] == q {
                 return;
             }
             stamp[k as usize] = q;
@@ -1389,7 +1398,7 @@ impl SpatialHash {
                 }
             }),
             None => {
-                for k in 0..boxes.len() as u32 {
+                for k in from..boxes.len() as u32 {
                     visit(k, stamp);
                 }
             }

@@ -161,6 +161,12 @@ pub struct SoftBodyStatus {
     pub tets: u32,
     /// Times the packed model was rebuilt (topology or parameter changes).
     pub rebuilds: u32,
+    /// Self-collision passes in the last fixed step (zero without [`SelfCollision`]).
+    pub contact_passes: u32,
+    /// In the last fixed step, self-collision met a configuration its fail-safe could not
+    /// separate: the surface's free particles were held where that pass began (free of
+    /// intersections), and a warning names the body.
+    pub contact_failed: bool,
 }
 
 /// The state a [`SoftBodyStatus`] reports.

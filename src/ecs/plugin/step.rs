@@ -37,7 +37,7 @@ pub(super) fn step(
     clock: Res<SoftBodyClock>,
     pool: Res<SoftBodyKernelPool>,
     mut timing: ResMut<crate::ecs::diagnostics::StepTiming>,
-    mut bodies: Query<(&SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
+    mut bodies: Query<(Entity, &SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
 ) {
     if !clock.running() {
         return;
@@ -45,7 +45,7 @@ pub(super) fn step(
     let start = bevy::platform::time::Instant::now();
     bodies
         .par_iter_mut()
-        .for_each(|(body, mut bs, mut status)| {
+        .for_each(|(entity, body, mut bs, mut status)| {
             let bs = &mut *bs;
             let Some(sim) = bs.sim.as_mut() else { return };
             if bs.diverged.is_some() {
@@ -57,8 +57,22 @@ pub(super) fn step(
             }
             let start = bevy::platform::time::Instant::now();
             let before = sim.stats();
+            let contact_before = sim.system.self_contact.as_ref().map(|c| c.total);
             let result = pool.advance(sim);
             let after = sim.stats();
+            if let (Some(b), Some(a)) = (
+                contact_before,
+                sim.system.self_contact.as_ref().map(|c| c.total),
+            ) {
+                status.contact_passes = a.passes_run - b.passes_run;
+                status.contact_failed = a.failures > b.failures;
+                if status.contact_failed {
+                    warn!(
+                        "soft body {entity}: self-collision could not separate its surface within {} impact-zone iterations; its free particles were held where the pass began (free of intersections)",
+                        crate::core::self_contact::ZONE_ITERATIONS
+                    );
+                }
+            }
             status.linear_iterations = after
                 .linear_iterations
                 .saturating_sub(before.linear_iterations)
