@@ -248,6 +248,9 @@ pub struct SelfContact {
     pub surface: ContactSurface,
     /// Settings.
     pub params: SelfContactParams,
+    /// Continuous-detection sweeps before the impact zones take over ([`CCD_PASSES`]; zero
+    /// leaves every collision to the zones).
+    pub ccd_passes: u32,
     /// What the last pass did.
     pub last: SelfContactReport,
     /// Totals since the handler was made.
@@ -308,6 +311,7 @@ impl SelfContact {
         Self {
             surface,
             params,
+            ccd_passes: CCD_PASSES,
             ..Default::default()
         }
     }
@@ -444,7 +448,7 @@ impl SelfContact {
 
         // 3: continuous detection, Gauss–Seidel passes.
         let mut clean = false;
-        for _ in 0..CCD_PASSES {
+        for _ in 0..self.ccd_passes {
             let t0 = Instant::now();
             ctx.ensure_broad(s);
             let t1 = Instant::now();
@@ -931,7 +935,9 @@ impl Ctx<'_> {
     }
 
     /// Moves every zone of more than one particle rigidly with its momentum and angular
-    /// momentum (about its centre of mass at the start); returns the number of zones.
+    /// momentum (about its centre of mass at the start); then gives the end velocities each
+    /// zone's rigid part (momentum and angular momentum about its centre at the end kept; the
+    /// relative motion, and only its energy, removed). Returns the number of zones.
     fn rigidify(&self, s: &mut Scratch) -> u32 {
         let n = s.p0.len();
         s.zone_sum.clear();
@@ -945,36 +951,9 @@ impl Ctx<'_> {
                 z.fixed += 1;
                 z.fixed_u += s.u[i];
                 z.fixed_v += s.vel[i];
-                continue;
-            }
-            let m = 1.0 / s.w[i];
-            z.m += m;
-            z.mx += s.p0[i] * m;
-            z.mu += s.u[i] * m;
-        }
-        let mut zones = 0;
-        for r in 0..n {
-            if s.zone_sum[r].count > 1 && s.zone_sum[r].m > 0.0 {
-                zones += 1;
-                let z = &mut s.zone_sum[r];
-                z.xc = z.mx / z.m;
-                z.uc = z.mu / z.m;
             }
         }
-        // Angular momentum and inertia about each zone's centre.
-        for &i in &self.surf.vertices {
-            let r = find(&mut s.zone, i) as usize;
-            let i = i as usize;
-            if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
-                continue;
-            }
-            let m = 1.0 / s.w[i];
-            let z = &mut s.zone_sum[r];
-            let d = s.p0[i] - z.xc;
-            z.l += d.cross(s.u[i] - z.uc) * m;
-            z.inertia += glam::DMat3::from_diagonal(DVec3::splat(d.length_squared()) * m)
-                - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z) * m;
-        }
+        let zones = self.fit_zones(s, false);
         for &i in &self.surf.vertices {
             let r = find(&mut s.zone, i) as usize;
             let i = i as usize;
@@ -982,22 +961,47 @@ impl Ctx<'_> {
             if s.w[i] == 0.0 || z.count < 2 {
                 continue;
             }
-            let d = s.p0[i] - z.xc;
             let new_end = if z.fixed > 0 {
                 // A zone holding pinned or prescribed particles translates with them.
                 s.p0[i] + z.fixed_u / z.fixed as f64 * self.h
             } else {
-                let omega = solve_inertia(z.inertia, z.l);
-                let turn = glam::DQuat::from_scaled_axis(omega * self.h);
-                z.xc + z.uc * self.h + turn * d
+                let turn = glam::DQuat::from_scaled_axis(z.omega * self.h);
+                z.xc + z.uc * self.h + turn * (s.p0[i] - z.xc)
             };
             s.u[i] = (new_end - s.p0[i]) / self.h;
         }
-        // End velocities: each zone's rigid part (momentum and angular momentum about its
-        // centre at the end kept; the relative motion, and only its energy, removed).
-        for r in 0..n {
-            let z = &mut s.zone_sum[r];
-            (z.m, z.mx, z.mu, z.l, z.inertia) = (
+        self.fit_zones(s, true);
+        for &i in &self.surf.vertices {
+            let r = find(&mut s.zone, i) as usize;
+            let i = i as usize;
+            let z = s.zone_sum[r];
+            if s.w[i] == 0.0 || z.count < 2 {
+                continue;
+            }
+            s.vel[i] = if z.fixed > 0 {
+                z.fixed_v / z.fixed as f64
+            } else {
+                z.uc + z.omega.cross(s.p0[i] + s.u[i] * self.h - z.xc)
+            };
+        }
+        zones
+    }
+
+    /// Each zone's rigid motion: the centre of mass `xc` of its free particles, their mean
+    /// velocity `uc` and the angular velocity `omega` with their angular momentum about `xc` —
+    /// at the start with the average velocities (`end` false), or at the end with the end
+    /// velocities. Returns the number of zones of more than one particle.
+    fn fit_zones(&self, s: &mut Scratch, end: bool) -> u32 {
+        let h = self.h;
+        let at = |s: &Scratch, i: usize| {
+            if end {
+                (s.p0[i] + s.u[i] * h, s.vel[i])
+            } else {
+                (s.p0[i], s.u[i])
+            }
+        };
+        for z in s.zone_sum.iter_mut() {
+            (z.m, z.xc, z.uc, z.l, z.inertia) = (
                 0.0,
                 DVec3::ZERO,
                 DVec3::ZERO,
@@ -1011,11 +1015,20 @@ impl Ctx<'_> {
             if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
                 continue;
             }
+            let (x, v) = at(s, i);
             let m = 1.0 / s.w[i];
             let z = &mut s.zone_sum[r];
             z.m += m;
-            z.mx += (s.p0[i] + s.u[i] * self.h) * m;
-            z.mu += s.vel[i] * m;
+            z.xc += x * m;
+            z.uc += v * m;
+        }
+        let mut zones = 0;
+        for z in s.zone_sum.iter_mut() {
+            if z.count > 1 && z.m > 0.0 {
+                zones += 1;
+                z.xc /= z.m;
+                z.uc /= z.m;
+            }
         }
         for &i in &self.surf.vertices {
             let r = find(&mut s.zone, i) as usize;
@@ -1023,28 +1036,16 @@ impl Ctx<'_> {
             if s.w[i] == 0.0 || s.zone_sum[r].count < 2 {
                 continue;
             }
+            let (x, v) = at(s, i);
             let m = 1.0 / s.w[i];
             let z = &mut s.zone_sum[r];
-            let (xc, vc) = (z.mx / z.m, z.mu / z.m);
-            let d = s.p0[i] + s.u[i] * self.h - xc;
-            z.l += d.cross(s.vel[i] - vc) * m;
+            let d = x - z.xc;
+            z.l += d.cross(v - z.uc) * m;
             z.inertia += glam::DMat3::from_diagonal(DVec3::splat(d.length_squared()) * m)
                 - glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z) * m;
         }
-        for &i in &self.surf.vertices {
-            let r = find(&mut s.zone, i) as usize;
-            let i = i as usize;
-            let z = s.zone_sum[r];
-            if s.w[i] == 0.0 || z.count < 2 {
-                continue;
-            }
-            s.vel[i] = if z.fixed > 0 {
-                z.fixed_v / z.fixed as f64
-            } else {
-                let (xc, vc) = (z.mx / z.m, z.mu / z.m);
-                let omega = solve_inertia(z.inertia, z.l);
-                vc + omega.cross(s.p0[i] + s.u[i] * self.h - xc)
-            };
+        for z in s.zone_sum.iter_mut() {
+            z.omega = solve_inertia(z.inertia, z.l);
         }
         zones
     }
@@ -1057,12 +1058,11 @@ struct ZoneSum {
     fixed_u: DVec3,
     fixed_v: DVec3,
     m: f64,
-    mx: DVec3,
-    mu: DVec3,
     xc: DVec3,
     uc: DVec3,
     l: DVec3,
     inertia: glam::DMat3,
+    omega: DVec3,
 }
 
 fn solve_inertia(i: glam::DMat3, l: DVec3) -> DVec3 {
