@@ -471,6 +471,73 @@ fn continuous_detection_and_impact_zones_each_stop_a_fast_cloth() {
     assert!(rep.zones > 0 && !rep.failed, "{rep:?}");
 }
 
+#[test]
+fn a_soft_tet_bar_draped_over_a_rod_collides_with_its_own_boundary() {
+    // A 1.2 m × 5 cm × 5 cm neo-Hookean bar (24 × 1 × 1 cubes, six tets each), soft (E = 20
+    // kPa), dropped across a thin rod: its ends fall and swing under it. Its scene has no
+    // surface: self-collision takes the tets' boundary.
+    let mesh = bevy_soft_body::core::fem::mesh::TetMesh::tet_box([1.2, 0.05, 0.05], [24, 1, 1])
+        .unwrap()
+        .transformed(1.0, [-0.6, 0.5, -0.025]);
+    let boundary = mesh.boundary();
+    let mut scene = mesh.to_scene(
+        "bar",
+        NeoHookean {
+            young: 2e4,
+            poisson: 0.3,
+            density: 200.0,
+        },
+    );
+    scene.surface = None;
+    scene.gravity = [0.0, -9.81, 0.0];
+    scene.colliders = vec![ColliderDesc {
+        shape: ShapeDesc::Capsule {
+            half_height: 0.3,
+            radius: 0.01,
+        },
+        motion: Motion::Fixed {
+            position: [0.0, 0.45, 0.0],
+        },
+        // The capsule's axis (y) turned onto z.
+        rotation: [
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ],
+        material: ContactMaterial::default(),
+    }];
+    // Edges of 5 cm, diagonals of 7 cm: 1 cm is well under half the shortest.
+    scene.self_collision = Some(SelfContactParams {
+        thickness: 0.01,
+        friction: 0.3,
+    });
+    let (model, state) = scene.build().unwrap();
+    assert_eq!(
+        model.self_contact.as_ref().unwrap().surface.triangles.len(),
+        boundary.len()
+    );
+    let mut sim = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::BackwardEuler,
+            policy: StepPolicy::Fixed { h: 1.0 / 120.0 },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        },
+    );
+    let mut worst = 0;
+    for _ in 0..90 {
+        sim.advance_frame().unwrap();
+        worst = worst.max(intersecting_pairs(&positions(&sim.state), &boundary));
+    }
+    let rep = sim.system.self_contact.as_ref().unwrap().total;
+    println!("tet bar: worst {worst} intersecting boundary pairs; {rep:?}");
+    assert_eq!(worst, 0);
+    assert!(rep.passes_run >= 90);
+}
+
 #[cfg(feature = "plugin")]
 mod plugin {
     use super::*;

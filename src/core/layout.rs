@@ -92,7 +92,8 @@ pub struct BodyLayout {
     pub drag: f64,
     /// Wind.
     pub wind: Option<Wind>,
-    /// Surface triangles (particle indices), for contact of the surface with itself.
+    /// Surface triangles (particle indices), for contact of the surface with itself (empty: the
+    /// tets' boundary).
     pub surface: Vec<[u32; 3]>,
     /// Contact of the surface with itself (`None`: none).
     pub self_collision: Option<SelfContactParams>,
@@ -156,6 +157,22 @@ impl BodyLayout {
             .unwrap_or_else(|| distance(self.particles[s.a].position, self.particles[s.b].position))
     }
 
+    /// The triangles self-collision uses: the surface's, or the tets' boundary when the layout
+    /// has no surface.
+    pub fn contact_triangles(&self) -> Vec<[u32; 3]> {
+        if self.surface.is_empty() && !self.tets.is_empty() {
+            crate::core::fem::mesh::boundary_faces(
+                &self
+                    .tets
+                    .iter()
+                    .map(|t| t.vertices.map(|v| v as u32))
+                    .collect::<Vec<_>>(),
+            )
+        } else {
+            self.surface.clone()
+        }
+    }
+
     /// Every rule a body must satisfy to be simulated; all problems at once, in the order of
     /// the layout's parts.
     pub fn validate(&self) -> Vec<LayoutError> {
@@ -191,7 +208,8 @@ impl BodyLayout {
             err(LayoutItem::Body, "material", m);
         }
         if let Some(sc) = &self.self_collision {
-            if self.surface.iter().flatten().any(|&i| i as usize >= n) {
+            let triangles = self.contact_triangles();
+            if triangles.iter().flatten().any(|&i| i as usize >= n) {
                 err(
                     LayoutItem::Body,
                     "surface",
@@ -203,7 +221,7 @@ impl BodyLayout {
                     .iter()
                     .map(|p| DVec3::from_array(p.position))
                     .collect();
-                let shortest = ContactSurface::new(&self.surface).shortest_edge(&x);
+                let shortest = ContactSurface::new(&triangles).shortest_edge(&x);
                 if let Err((field, m)) = sc.validate(shortest) {
                     let field = match field {
                         "friction" => "self_collision.friction",
@@ -374,7 +392,7 @@ impl BodyLayout {
         model.set_wind(self.wind);
         model.self_contact = self
             .self_collision
-            .map(|p| SelfContact::new(ContactSurface::new(&self.surface), p));
+            .map(|p| SelfContact::new(ContactSurface::new(&self.contact_triangles()), p));
         for &(p, f) in &self.forces {
             model.set_external_force(p, f.to_scalar());
         }

@@ -383,6 +383,7 @@ impl Scene {
             gravity: self.gravity,
             drag: self.drag,
             wind: self.wind,
+            // Without a surface, self-collision takes the tets' boundary.
             surface: match (&self.self_collision, &self.surface) {
                 (Some(_), Some(s)) => s.triangles.clone(),
                 _ => vec![],

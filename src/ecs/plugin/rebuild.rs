@@ -164,17 +164,7 @@ fn build_body(
     }
     if let Some((sc, triangles)) = fem.self_collision {
         layout.self_collision = Some(sc.params());
-        layout.surface = if triangles.is_empty() {
-            crate::core::fem::mesh::boundary_faces(
-                &layout
-                    .tets
-                    .iter()
-                    .map(|t| t.vertices.map(|v| v as u32))
-                    .collect::<Vec<_>>(),
-            )
-        } else {
-            triangles
-        };
+        layout.surface = triangles;
     }
     let (model, state) = layout.build().map_err(|errs| {
         // The first problem, named by the entity behind the packed index.
