@@ -2,36 +2,41 @@
 //! each other): the method of Bridson, Fedkiw and Anderson, *Robust treatment of collisions,
 //! contact and friction for cloth animation* (SIGGRAPH 2002).
 //!
-//! A step moves every surface vertex along a straight line from its start position `x₀` to
-//! its candidate end `x₁` (what the integrator produced), at the average velocity
-//! `u = (x₁ − x₀)/h`. Given a start free of intersections, the pass changes `u` so that the
-//! motion is free of them too, in four stages:
+//! A pass looks at the motion since the last pass: every surface vertex moves along a
+//! straight line from its start `x₀` to its candidate end `x₁` (what the integrator produced)
+//! at the average velocity `u = (x₁ − x₀)/τ`. Given a start free of intersections, the pass
+//! changes `u` so that the motion is free of them too, in four stages:
 //!
-//! 1. **Proximity** (§7.1–7.2): point–triangle and edge–edge pairs closer than the thickness
-//!    at the start get an inelastic impulse (their approach stops) with Coulomb friction
-//!    limited by it (`|Δv_t| ≤ μ |Δv_n|`);
+//! 1. **Proximity**: point–triangle and edge–edge pairs closer than [`PROXIMITY`] thicknesses
+//!    at the start stop approaching: an inelastic impulse with the pair's effective mass, and
+//!    Coulomb friction limited by it (`|Δv_t| ≤ μ |Δv_n|`);
 //! 2. **Separation**: pairs closer than the thickness at the end are pushed apart in position
 //!    only (the velocity is not changed, so the push adds no kinetic energy);
-//! 3. **Continuous detection** (§6.3, §7.3): for each pair, the times at which its four points
-//!    are coplanar (roots of a cubic in the step's time) are checked for contact; a collision
-//!    gets an inelastic impulse at that instant and a small separation in position; repeated
-//!    in Gauss–Seidel passes;
-//! 4. **Rigid impact zones** (§7.4), the fail-safe: vertices of pairs still colliding after
-//!    the passes are merged into zones (zones sharing a vertex merge), and each zone moves as a
+//! 3. **Continuous detection**: for each pair, the times at which its four points are
+//!    coplanar (roots of a cubic in the pass's time) are checked for contact; a collision
+//!    gets an inelastic impulse at that instant and a separation of a tenth of the thickness
+//!    in position; repeated in Gauss–Seidel sweeps;
+//! 4. **Rigid impact zones**, the fail-safe: vertices of pairs still colliding after the
+//!    sweeps are merged into zones (zones sharing a vertex merge), and each zone moves as a
 //!    rigid body with its linear and angular momentum, until no pair collides. A rigid motion
 //!    of an intersection-free zone keeps it intersection-free, so this ends; if it has not
 //!    within its budget, every free surface vertex stays at its start (which was free of
 //!    intersections), and the pass reports the failure.
 //!
-//! Impulses go to the end velocities as well (the inelastic part and friction; pushes made
-//! for separation move positions only). Every impulse acts on a pair with the pair's effective
-//! mass, so momentum is conserved and the kinetic energy of the pair's relative motion only
-//! decreases. Pinned and prescribed particles (inverse mass zero) are never moved.
+//! The end velocities take their own inelastic impulses along the same normals (and each
+//! zone's rigid part), not the change made to `u`: a pair whose end velocities already
+//! separate is left alone, so a pass never adds kinetic energy. Pinned and prescribed
+//! particles (inverse mass zero) are never moved; particles resting on a collider count
+//! [`SUPPORT_MASS`] times heavier.
 //!
-//! The geometry is computed in `f64` whatever [`Scalar`] is. The broad phase is a spatial hash
-//! of the swept boxes of triangles and edges (Teschner et al., *Optimized spatial hashing for
-//! collision detection of deformable objects*, 2003), rebuilt every pass from the current
-//! motion, so cost stays near-linear in the surface's size.
+//! Passes run when the surface's parts may have come [`PASS_TRAVEL`] thicknesses closer since
+//! the last one, and at the end of every frame (the collision step spans the internal
+//! dynamics' steps, as in Bridson et al.), so each pass sees short motions and every frame
+//! ends free of intersections. The geometry is computed in `f64` whatever [`Scalar`] is. The
+//! broad phase is a spatial hash of swept boxes (Teschner et al., *Optimized spatial hashing
+//! for collision detection of deformable objects*, 2003) whose candidate pairs are kept
+//! across passes while every vertex stays within its box's margin relative to the surface's
+//! mean motion (a Verlet list).
 
 use crate::math::{Scalar, ToScalar, Vector};
 use glam::DVec3;
