@@ -92,6 +92,18 @@ fn watch(scene: &Scene, frames: u64) -> (Watch, Simulation<ParticleState, Partic
     let tris = scene.surface.as_ref().unwrap().triangles.clone();
     let (model, state) = scene.build().unwrap();
     let mut sim = Simulation::new(model, state, config());
+    let w = run_watched(&mut sim, &tris, frames, THICK);
+    (w, sim)
+}
+
+/// Advances `frames` frames, checking every frame's triangles `tris` for intersections and
+/// for particles closer than `thick` to a triangle.
+fn run_watched(
+    sim: &mut Simulation<ParticleState, ParticleModel>,
+    tris: &[[u32; 3]],
+    frames: u64,
+    thick: f64,
+) -> Watch {
     let mut w = Watch {
         worst_pairs: 0,
         first_bad_frame: None,
@@ -100,14 +112,14 @@ fn watch(scene: &Scene, frames: u64) -> (Watch, Simulation<ParticleState, Partic
     for _ in 0..frames {
         sim.advance_frame().unwrap();
         let x = positions(&sim.state);
-        let bad = intersecting_pairs(&x, &tris);
+        let bad = intersecting_pairs(&x, tris);
         if bad > 0 && w.first_bad_frame.is_none() {
             w.first_bad_frame = Some(sim.frame);
         }
         w.worst_pairs = w.worst_pairs.max(bad);
-        w.closest = w.closest.min(closest_approach(&x, &tris, THICK));
+        w.closest = w.closest.min(closest_approach(&x, tris, thick));
     }
-    (w, sim)
+    w
 }
 
 #[test]
@@ -436,19 +448,7 @@ fn thrown_onto_pinned(ccd_passes: u32) -> (Watch, SelfContactReport) {
             ..Default::default()
         },
     );
-    let mut w = Watch {
-        worst_pairs: 0,
-        first_bad_frame: None,
-        closest: f64::INFINITY,
-    };
-    for _ in 0..60 {
-        sim.advance_frame().unwrap();
-        let bad = intersecting_pairs(&positions(&sim.state), &tris);
-        if bad > 0 && w.first_bad_frame.is_none() {
-            w.first_bad_frame = Some(sim.frame);
-        }
-        w.worst_pairs = w.worst_pairs.max(bad);
-    }
+    let w = run_watched(&mut sim, &tris, 60, 0.01);
     (w, sim.system.self_contact.as_ref().unwrap().total)
 }
 
@@ -527,11 +527,7 @@ fn a_soft_tet_bar_draped_over_a_rod_collides_with_its_own_boundary() {
             ..Default::default()
         },
     );
-    let mut worst = 0;
-    for _ in 0..90 {
-        sim.advance_frame().unwrap();
-        worst = worst.max(intersecting_pairs(&positions(&sim.state), &boundary));
-    }
+    let worst = run_watched(&mut sim, &boundary, 90, 0.01).worst_pairs;
     let rep = sim.system.self_contact.as_ref().unwrap().total;
     println!("tet bar: worst {worst} intersecting boundary pairs; {rep:?}");
     assert_eq!(worst, 0);
