@@ -309,14 +309,14 @@ fn run(a: &Args) -> Result<(), String> {
             summary(a, &name, sim.frame, sim.stats(), started, 1);
             r
         }
-        Some(scene) => {
+        Some(mut scene) => {
             fs::write(out.join("scene.json"), scene.to_json()).map_err(|e| e.to_string())?;
             let (model, state) = scene.build().map_err(|e| e.to_string())?;
-            let n = model.len();
             let mut sim = Simulation::new(model, state, config(a));
             let rows = |sim: &Simulation<ParticleState, ParticleModel>,
                         fc: &mut BufWriter<fs::File>,
                         ec: &mut BufWriter<fs::File>| {
+                let n = sim.state.x.len();
                 let mut line = String::with_capacity(64 * n);
                 for i in 0..n {
                     let (x, v) = (sim.state.x[i], sim.state.v[i]);
@@ -333,17 +333,34 @@ fn run(a: &Args) -> Result<(), String> {
             if a.obj {
                 write_obj(&out, &scene, &sim)?;
             }
-            let mut obj_err = None;
-            let r = sim.run(frames, |s, _| {
-                rows(s, &mut fcsv, &mut ecsv);
-                if a.obj && obj_err.is_none() {
-                    obj_err = write_obj(&out, &scene, s).err();
+            // Frame by frame; a scene with `tearing` tears after each frame (particles are
+            // added, so frames.csv and the .obj files grow with it).
+            let mut r = Ok(());
+            let mut torn = (0usize, 0usize);
+            for _ in 0..frames {
+                if let Err(d) = sim.advance_frame() {
+                    r = Err(d);
+                    break;
                 }
-                prog.tick(s.frame);
-            });
-            if let Some(e) = obj_err {
-                return Err(e);
+                if scene.tearing.is_some() {
+                    let t = bevy_soft_body::core::tear::tear_scene(&mut scene, &mut sim)
+                        .map_err(|e| e.to_string())?;
+                    torn.0 += t.broken.len();
+                    torn.1 += t.copies.len();
+                }
+                rows(&sim, &mut fcsv, &mut ecsv);
+                if a.obj {
+                    write_obj(&out, &scene, &sim)?;
+                }
+                prog.tick(sim.frame);
             }
+            if scene.tearing.is_some() && !a.quiet {
+                println!(
+                    "tearing: {} springs broke, {} particles split off",
+                    torn.0, torn.1
+                );
+            }
+            let n = sim.state.x.len();
             summary(a, &name, sim.frame, sim.stats(), started, n);
             r
         }

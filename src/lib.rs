@@ -83,8 +83,8 @@ pub mod prelude {
         ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SelfCollision, SoftBody,
         SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged,
         SoftBodyForceFields, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid,
-        SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems, SoftBodyWind,
-        SpawnSoftBody, Spring, SpringOf, Tet, TetOf, triangle_mesh,
+        SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems, SoftBodyTorn,
+        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tearable, Tet, TetOf, triangle_mesh,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{

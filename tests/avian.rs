@@ -7,7 +7,6 @@
 
 mod common;
 use avian3d::prelude::*;
-use bevy::ecs::system::RunSystemOnce;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::avian::SoftBodyImpulse;
@@ -16,6 +15,7 @@ use bevy_soft_body::core::driver::StepPolicy;
 use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::core::scene::{ParticleDesc, Scene};
 use bevy_soft_body::ecs::*;
+use common::spawn;
 use glam::DVec3;
 
 const HZ: f64 = 60.0;
@@ -38,13 +38,6 @@ fn app() -> App {
     app.cleanup();
     app.update();
     app
-}
-
-fn spawn(app: &mut App, scene: &Scene, body: SoftBody) -> Entity {
-    let scene = scene.clone();
-    app.world_mut()
-        .run_system_once(move |mut c: Commands| c.spawn_soft_body(&scene, body.clone()).unwrap())
-        .unwrap()
 }
 
 fn explicit(h: f64) -> SoftBody {

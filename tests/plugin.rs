@@ -16,6 +16,7 @@ use bevy_soft_body::core::scene::Scene;
 use bevy_soft_body::ecs::*;
 use bevy_soft_body::math::VectorExt;
 use bevy_soft_body::render::SoftBodySurface;
+use common::spawn;
 
 /// 1/64 s: exactly representable, so the plugin's frame (from `Time<Fixed>`'s `Duration`) and
 /// the core driver's are the same number.
@@ -23,13 +24,6 @@ const FRAME: f64 = 1.0 / 64.0;
 
 fn app() -> App {
     common::headless_app(FRAME)
-}
-
-fn spawn(app: &mut App, scene: &Scene, body: SoftBody) -> Entity {
-    let scene = scene.clone();
-    app.world_mut()
-        .run_system_once(move |mut c: Commands| c.spawn_soft_body(&scene, body.clone()).unwrap())
-        .unwrap()
 }
 
 fn frames(app: &App, body: Entity) -> u64 {

@@ -537,9 +537,9 @@ fn a_soft_tet_bar_draped_over_a_rod_collides_with_its_own_boundary() {
 #[cfg(feature = "plugin")]
 mod plugin {
     use super::*;
-    use bevy::ecs::system::RunSystemOnce;
     use bevy::prelude::*;
     use bevy_soft_body::ecs::BodySim;
+    use common::spawn;
 
     /// 1/64 s: exactly representable, so the plugin's frame and the core driver's agree.
     const FRAME: f64 = 1.0 / 64.0;
@@ -605,15 +605,6 @@ mod plugin {
         }
     }
 
-    fn spawn(app: &mut App, scene: &Scene, body: SoftBody) -> Entity {
-        let scene = scene.clone();
-        app.world_mut()
-            .run_system_once(move |mut c: Commands| {
-                c.spawn_soft_body(&scene, body.clone()).unwrap()
-            })
-            .unwrap()
-    }
-
     #[test]
     fn a_self_colliding_body_steps_as_the_core_does() {
         let (scene, h) = small_pile();
@@ -649,6 +640,100 @@ mod plugin {
         assert_eq!(
             plugin.state.x, sim.state.x,
             "the plugin's body and the core's scene part ways"
+        );
+    }
+
+    /// Cloth `k` of a pile of `n × n` cloths as a scene of its own (its particles, springs
+    /// and triangles, renumbered; the colliders only with the first, so they are spawned once).
+    fn cloth_of(pile: &Scene, n: usize, k: usize) -> Scene {
+        let (lo, hi) = (k * n * n, (k + 1) * n * n);
+        let mut s = pile.clone();
+        s.particles = pile.particles[lo..hi].to_vec();
+        s.springs = pile
+            .springs
+            .iter()
+            .filter(|sp| (lo..hi).contains(&sp.a) && (lo..hi).contains(&sp.b))
+            .map(|sp| {
+                let mut sp = sp.clone();
+                sp.a -= lo;
+                sp.b -= lo;
+                sp
+            })
+            .collect();
+        let surf = s.surface.as_mut().unwrap();
+        surf.triangles
+            .retain(|t| t.iter().all(|&i| (lo..hi).contains(&(i as usize))));
+        for t in &mut surf.triangles {
+            *t = t.map(|i| i - lo as u32);
+        }
+        if !surf.uvs.is_empty() {
+            surf.uvs = surf.uvs[lo..hi].to_vec();
+        }
+        if k > 0 {
+            s.colliders.clear();
+        }
+        s
+    }
+
+    /// Two 16² cloths of the pile spawned as two bodies (stepped apart, in parallel), 2.5 s:
+    /// the second lands on the first over the sphere. Returns the most intersecting triangle
+    /// pairs in any frame (the exact test of `common::intersect`, over both surfaces
+    /// together: between them and within each), the closest approach of a particle to a
+    /// triangle it is not a vertex of, and the passes the first body's status counted.
+    fn two_bodies(second_collides: bool) -> (usize, f64, u32, f64) {
+        let n = 16;
+        let mut p = ClothPileParams {
+            cloths: 2,
+            ..Default::default()
+        }
+        .with_resolution(n);
+        let thick = p.self_collision.unwrap().thickness;
+        p.self_collision = Some(SelfContactParams {
+            thickness: thick,
+            friction: 0.25,
+        });
+        let pile = cloth_pile(&p).unwrap();
+        let h = p.stable_step();
+        let mut app = common::headless_app(FRAME);
+        let a = spawn(&mut app, &cloth_of(&pile, n, 0), body(h));
+        let b = spawn(&mut app, &cloth_of(&pile, n, 1), body(h));
+        if !second_collides {
+            app.world_mut().entity_mut(b).remove::<SelfCollision>();
+        }
+        let tris_a = pile.surface.as_ref().unwrap().triangles.clone();
+        let (mut worst, mut closest, mut passes) = (0, f64::INFINITY, 0);
+        for _ in 0..160 {
+            app.update();
+            let world = app.world();
+            let mut x = vec![];
+            for e in [a, b] {
+                let bs = world.get::<BodySim>(e).unwrap();
+                x.extend(positions(&bs.simulation().unwrap().state));
+            }
+            worst = worst.max(intersecting_pairs(&x, &tris_a));
+            closest = closest.min(closest_approach(&x, &tris_a, thick));
+            passes = world.get::<SoftBodyStatus>(a).unwrap().contact_passes;
+        }
+        (worst, closest, passes, thick)
+    }
+
+    #[test]
+    fn two_bodies_with_self_collision_collide_with_each_other() {
+        let (worst, closest, passes, thick) = two_bodies(true);
+        println!(
+            "two bodies: {worst} intersecting pairs at worst, closest {:.2} mm (thickness {:.1} mm)",
+            closest * 1e3,
+            thick * 1e3
+        );
+        assert_eq!(worst, 0, "the two bodies' surfaces intersect");
+        // As within one body: no particle nearer a triangle than half the thickness.
+        assert!(closest >= 0.5 * thick, "closest {closest} m");
+        assert!(passes >= 1);
+        let (worst_off, _, _, _) = two_bodies(false);
+        println!("second without SelfCollision: {worst_off} intersecting pairs at worst");
+        assert!(
+            worst_off > 0,
+            "the scene does not test contact between the bodies"
         );
     }
 

@@ -262,6 +262,17 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         }
     }
 
+    /// Replaces the model and state with ones of a changed layout (a tear adds particles and
+    /// removes springs), keeping the clock, the frame count, the settings and the energy
+    /// guard's bound; the integrator starts afresh (its history belongs to the old layout).
+    pub fn replace(&mut self, system: Sys, mut state: S) {
+        system.apply_constraints(self.time, &mut state);
+        self.integrator = Self::build_integrator(&system, &self.config);
+        self.backup = state.clone();
+        self.system = system;
+        self.state = state;
+    }
+
     /// The settings.
     pub fn config(&self) -> &DriverConfig {
         &self.config

@@ -2,6 +2,7 @@
 //! forces, collisions, scene layouts and the headless driver. Everything here can be tested,
 //! benchmarked and charted without a window or an App.
 
+pub mod body_contact;
 pub mod build;
 pub mod collide;
 pub mod driver;
@@ -18,3 +19,4 @@ pub mod scene;
 pub mod self_contact;
 pub mod solve;
 pub mod study;
+pub mod tear;

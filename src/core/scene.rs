@@ -155,6 +155,10 @@ pub struct Scene {
     /// Contact of the surface with itself (and, in one scene, of its parts with each other).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub self_collision: Option<SelfContactParams>,
+    /// Springs break past this strain and the surface tears along them
+    /// ([`crate::core::tear`]; `None`: nothing breaks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tearing: Option<crate::core::tear::TearParams>,
 }
 
 /// One problem found in a scene, with the path of the field (`springs[3].b`).
@@ -272,6 +276,11 @@ impl Scene {
                 LayoutItem::Force(k) => format!("forces[{k}].{}", e.field),
             };
             err(path, &e.message);
+        }
+        if let Some(t) = &self.tearing
+            && let Err((field, message)) = t.validate()
+        {
+            err(format!("tearing.{field}"), &message);
         }
         for (k, c) in self.colliders.iter().enumerate() {
             if !c.shape.is_valid() {
@@ -455,6 +464,7 @@ impl Scene {
                 .extend(o.triangles.into_iter().map(|t| t.map(|i| i + o32)));
         }
         self.self_collision = self.self_collision.or(other.self_collision);
+        self.tearing = self.tearing.or(other.tearing);
         self
     }
 

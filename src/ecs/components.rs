@@ -369,6 +369,13 @@ pub struct ExternalForce(pub Vec3);
 /// and rigid impact zones (Bridson, Fedkiw and Anderson 2002; see
 /// [`crate::core::self_contact`]); every state a fixed step delivers is free of
 /// self-intersections. Bodies without it pay nothing.
+///
+/// Two bodies that both have it also collide with each other: after every body has
+/// stepped the frame, bodies whose swept boxes overlap go through one pass over the frame
+/// as a single surface (their smallest thickness, their mean friction; see
+/// [`crate::core::body_contact`]), so the frame also ends free of intersections between
+/// them. (A body without it is not seen by the others: one component is the switch for
+/// soft–soft contact, at no cost to bodies that do not ask for it.)
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Debug)]
 pub struct SelfCollision {
@@ -597,6 +604,56 @@ impl bevy::ecs::entity::MapEntities for SoftBodyInitial {
             *e = mapper.get_mapped(*e);
         }
     }
+}
+
+/// Springs of the body break when stretched past `max_strain` (on the body root), and its
+/// [`SoftBodySurface`](crate::render::SoftBodySurface) tears along them: the particle at a
+/// broken surface edge is split square to the edge, and the drawn mesh follows (see
+/// [`crate::core::tear`]). Checked at every fixed step's end; each tear sends a
+/// [`SoftBodyTorn`] and rebuilds the body's model the next step. Scene key
+/// `"tearing": { "max_strain": … }`.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct Tearable {
+    /// Strain at which a spring breaks (`0.5`: at 1.5 times its rest length). Positive.
+    pub max_strain: f32,
+}
+
+impl Default for Tearable {
+    fn default() -> Self {
+        Self {
+            max_strain: crate::core::tear::TearParams::default().max_strain as f32,
+        }
+    }
+}
+
+impl Tearable {
+    /// The core's settings.
+    pub fn params(&self) -> crate::core::tear::TearParams {
+        crate::core::tear::TearParams {
+            max_strain: self.max_strain as f64,
+        }
+    }
+}
+
+impl From<crate::core::tear::TearParams> for Tearable {
+    fn from(p: crate::core::tear::TearParams) -> Self {
+        Self {
+            max_strain: p.max_strain as f32,
+        }
+    }
+}
+
+/// Sent when a [`Tearable`] body tears (a message, and an entity event triggered on the body).
+#[derive(Message, EntityEvent, Clone, Debug)]
+pub struct SoftBodyTorn {
+    /// The body's root entity.
+    #[event_target]
+    pub body: Entity,
+    /// The springs that broke (already despawned).
+    pub springs: Vec<Entity>,
+    /// The particles split: (the original, its new copy).
+    pub split: Vec<(Entity, Entity)>,
 }
 
 /// Send to put every body with a [`SoftBodyInitial`] back to it and the clock back to zero.

@@ -148,6 +148,9 @@ pub(crate) fn spawn_scene(
         if let Some(sc) = scene.self_collision {
             this.entity(root).insert(SelfCollision::from(sc));
         }
+        if let Some(t) = scene.tearing {
+            this.entity(root).insert(Tearable::from(t));
+        }
         if let Some(s) = &scene.surface {
             this.entity(root).insert(SoftBodySurface {
                 triangles: s.triangles.clone(),

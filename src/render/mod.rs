@@ -356,6 +356,9 @@ fn sync_surfaces(
     let mut materials = materials;
     for (e, surface, (bs, prev), mesh3d, vertices, has_material) in &q {
         let Some(sim) = bs.simulation() else { continue };
+        if bs.awaiting_rebuild() {
+            continue; // torn: the surface names particles the model takes in at its next step
+        }
         if !sim.state.is_finite() {
             continue;
         }

@@ -67,4 +67,21 @@ mod plugin {
         app.update();
         app
     }
+
+    /// Spawns `scene` as one body with `body`'s settings (through `spawn_soft_body`, as a
+    /// game would) and returns its root.
+    pub fn spawn(
+        app: &mut App,
+        scene: &bevy_soft_body::core::scene::Scene,
+        body: bevy_soft_body::ecs::SoftBody,
+    ) -> Entity {
+        use bevy::ecs::system::RunSystemOnce;
+        use bevy_soft_body::ecs::SpawnSoftBody;
+        let scene = scene.clone();
+        app.world_mut()
+            .run_system_once(move |mut c: Commands| {
+                c.spawn_soft_body(&scene, body.clone()).unwrap()
+            })
+            .unwrap()
+    }
 }

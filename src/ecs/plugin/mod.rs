@@ -18,7 +18,7 @@ mod rebuild;
 mod step;
 use motion::scripted_motion;
 pub(crate) use rebuild::prepare;
-use step::{reset, step, tick, writeback};
+use step::{contact_between, reset, step, tear, tick, writeback};
 
 /// Soft-body physics. Runs in `FixedUpdate` by default ([`SoftBodyPlugin::new`] picks another
 /// schedule), in the chained sets [`SoftBodySystems`]; meshes and debug drawing follow in
@@ -148,7 +148,8 @@ pub enum SoftBodySystems {
     /// bodies in parallel. Forces, integration and collision run inside this one set rather
     /// than as systems of their own: a multi-stage method (RK4, the implicit methods' Newton
     /// iterations) evaluates the forces several times per substep, and a frame has many
-    /// substeps.
+    /// substeps. Then contact between bodies with [`SelfCollision`] whose frames' boxes
+    /// overlap (one pass per group of touching bodies over the frame).
     Step,
     /// Core state → [`Particle`] components (and their `Transform`s), messages, events and
     /// diagnostics sent.
@@ -184,6 +185,8 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<ExternalForce>()
             .register_type::<SoftBodyWind>()
             .register_type::<SelfCollision>()
+            .register_type::<Tearable>()
+            .add_message::<SoftBodyTorn>()
             .register_type::<GlobalWind>()
             .register_type::<SoftBodyForceFields>()
             .register_type::<GlobalForceFields>()
@@ -216,8 +219,10 @@ impl Plugin for SoftBodyPlugin {
                     (reset, scripted_motion, motion::scale_colliders, prepare)
                         .chain()
                         .in_set(SoftBodySystems::Prepare),
-                    step.in_set(SoftBodySystems::Step),
-                    (writeback, super::diagnostics::measure, tick)
+                    (step, contact_between)
+                        .chain()
+                        .in_set(SoftBodySystems::Step),
+                    (writeback, tear, super::diagnostics::measure, tick)
                         .chain()
                         .in_set(SoftBodySystems::Writeback),
                 ),
@@ -236,6 +241,11 @@ pub struct BodySim {
     index: HashMap<Entity, u32>,
     /// Spring entities in the body's relationship order (the packed list may skip some).
     pub(crate) springs: Vec<Entity>,
+    /// The spring entity of each packed spring.
+    pub(crate) packed_springs: Vec<Entity>,
+    /// Torn this frame: its components changed, its model is rebuilt at the next step (until
+    /// then its surface may name particles the model does not have yet).
+    pub(crate) torn: bool,
     /// Tet entities in the body's relationship order.
     pub(crate) tets: Vec<Entity>,
     /// Positions and velocities as last written to the components (to tell user edits apart).
@@ -244,6 +254,9 @@ pub struct BodySim {
     pub(crate) follow: Vec<(u32, Entity, Vec3, Vec3)>,
     /// Pinned-in-place particle indices (editing their position moves the pin).
     fixed_pins: Vec<u32>,
+    /// Positions at the start of the last frame (bodies with self-collision: for contact
+    /// with other bodies after the step).
+    frame_start: Vec<crate::math::Vector>,
     problem: Option<String>,
     diverged: Option<Divergence>,
     report: bool,
@@ -270,6 +283,12 @@ impl BodySim {
     #[cfg_attr(not(feature = "avian"), allow(dead_code))]
     pub(crate) fn frame_dt(&self) -> f64 {
         self.frame_dt
+    }
+
+    /// True between a tear and the rebuild that takes it in (the surface may then name
+    /// particles the model does not have yet).
+    pub fn awaiting_rebuild(&self) -> bool {
+        self.torn
     }
 
     /// The packed index of a particle entity of this body.

@@ -24,6 +24,8 @@ struct FemInput<'a, 'w, 's> {
     solver: SolverChoice,
     /// Self-collision and the surface's triangles (empty: the tets' boundary).
     self_collision: Option<(SelfCollision, Vec<[u32; 3]>)>,
+    /// Tearing (checked here, applied after each step).
+    tearable: Option<Tearable>,
 }
 
 /// Tets, tets edited this frame, tets and materials removed.
@@ -37,6 +39,7 @@ type TetParams<'w, 's> = (
 /// What a rebuild produced.
 struct Built {
     sim: Simulation<ParticleState, ParticleModel>,
+    packed_springs: Vec<Entity>,
     particles: Vec<Entity>,
     index: HashMap<Entity, u32>,
     follow: Vec<(u32, Entity, Vec3, Vec3)>,
@@ -162,6 +165,11 @@ fn build_body(
         });
         packed_tets.push(te);
     }
+    if let Some(t) = fem.tearable
+        && let Err((field, message)) = t.params().validate()
+    {
+        return Err(format!("soft body {body_e}: Tearable {field} {message}"));
+    }
     if let Some((sc, triangles)) = fem.self_collision {
         layout.self_collision = Some(sc.params());
         layout.surface = triangles;
@@ -212,6 +220,7 @@ fn build_body(
         .map_err(|e| format!("soft body {body_e}: {e}"))?;
     Ok(Built {
         sim: Simulation::new(model, state, config),
+        packed_springs,
         particles: ents,
         index,
         follow,
@@ -237,7 +246,8 @@ pub(crate) fn prepare(
             Option<Ref<LinearSolverChoice>>,
             Option<&SoftBodyForceFields>,
             Option<Ref<SelfCollision>>,
-            Option<Ref<SoftBodySurface>>,
+            Option<Mut<SoftBodySurface>>,
+            Option<Ref<Tearable>>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -284,7 +294,7 @@ pub(crate) fn prepare(
         plist,
         slist,
         wind,
-        (tlist, material, solver, fields, self_collision, surface),
+        (tlist, material, solver, fields, self_collision, mut surface, tearable),
     ) in &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
@@ -302,6 +312,7 @@ pub(crate) fn prepare(
             || material.as_ref().is_some_and(|m| m.is_changed())
             || solver.as_ref().is_some_and(|m| m.is_changed())
             || self_collision.as_ref().is_some_and(|c| c.is_changed())
+            || tearable.as_ref().is_some_and(|t| t.is_changed())
             || (self_collision.is_some() && surface.as_ref().is_some_and(|s| s.is_changed()))
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
@@ -345,8 +356,17 @@ pub(crate) fn prepare(
                 }
             }
         }
+        if dirty
+            && let Some(surf) = surface.as_mut()
+            && !surf.is_changed()
+            && !bs.particles.is_empty()
+            && bs.particles.as_slice() != plist
+        {
+            follow_removed_particles(body_e, &bs.particles, plist, surf, &mut commands);
+        }
         if dirty {
             bs.diverged = None;
+            bs.torn = false;
             bs.report = false;
             bs.frame_dt = frame_dt;
             bs.springs = slist.to_vec();
@@ -359,6 +379,7 @@ pub(crate) fn prepare(
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
                 self_collision: self_collision
                     .map(|c| (*c, surface.map_or(vec![], |s| s.triangles.clone()))),
+                tearable: tearable.map(|t| *t),
             };
             match build_body(
                 body_e, &body, wind, plist, slist, &particles, &springs, &targets, frame_dt, fem,
@@ -377,6 +398,7 @@ pub(crate) fn prepare(
                     status.springs = b.sim.system.springs.len() as u32;
                     status.tets = b.sim.system.tets.len() as u32;
                     bs.sim = Some(b.sim);
+                    bs.packed_springs = b.packed_springs;
                     bs.particles = b.particles;
                     bs.index = b.index;
                     bs.follow = b.follow;
@@ -418,4 +440,51 @@ pub(crate) fn prepare(
             }
         }
     }
+}
+
+/// A body's particles were removed or reordered (a mouse grab's handle let go after a tear
+/// appended particles behind it) while its surface was left as it was: the surface's
+/// triangles and texture coordinates follow their particles to their new indices (triangles
+/// with a particle gone are dropped), and the drawn mesh is made afresh.
+fn follow_removed_particles(
+    body_e: Entity,
+    old: &[Entity],
+    new: &[Entity],
+    surf: &mut Mut<SoftBodySurface>,
+    commands: &mut Commands,
+) {
+    let at: HashMap<Entity, u32> = new
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (*e, i as u32))
+        .collect();
+    let map: Vec<Option<u32>> = old.iter().map(|e| at.get(e).copied()).collect();
+    if map.iter().enumerate().all(|(i, m)| *m == Some(i as u32)) {
+        return; // only appended
+    }
+    let tris: Vec<[u32; 3]> = surf
+        .triangles
+        .iter()
+        .filter_map(|t| {
+            let m = t.map(|i| map.get(i as usize).copied().flatten());
+            Some([m[0]?, m[1]?, m[2]?])
+        })
+        .collect();
+    let uvs = (surf.uvs.len() == old.len()).then(|| {
+        let mut uvs = vec![[0.0; 2]; new.len()];
+        for (i, m) in map.iter().enumerate() {
+            if let Some(j) = m {
+                uvs[*j as usize] = surf.uvs[i];
+            }
+        }
+        uvs
+    });
+    let surf = &mut **surf;
+    surf.triangles = tris;
+    if let Some(uvs) = uvs {
+        surf.uvs = uvs;
+    }
+    commands
+        .entity(body_e)
+        .remove::<crate::render::SurfaceVertices>();
 }

@@ -56,6 +56,11 @@ pub(super) fn step(
                 return;
             }
             let start = bevy::platform::time::Instant::now();
+            if sim.system.self_contact.is_some() {
+                // The frame's start, for contact with other bodies after every body has moved.
+                bs.frame_start.clear();
+                bs.frame_start.extend_from_slice(&sim.state.x);
+            }
             let before = sim.stats();
             let contact_before = sim.system.self_contact.as_ref().map(|c| c.total);
             let result = pool.advance(sim);
@@ -151,5 +156,262 @@ pub(super) fn writeback(
     for (gt, mut track) in &mut colliders {
         let (_, rot, pos) = gt.to_scale_rotation_translation();
         track.prev = Some((pos, rot));
+    }
+}
+
+/// Contact between separate bodies that have [`SelfCollision`]: after every body has advanced
+/// the frame, the bodies whose swept boxes (grown by their thickness) overlap are grouped, and
+/// each group's surfaces go through one contact pass over the frame as a single surface
+/// ([`crate::core::body_contact`]); bodies that are paused, diverged or not yet built take no
+/// part. A group's handler is kept while its members stay the same.
+pub(super) fn contact_between(
+    clock: Res<SoftBodyClock>,
+    mut cache: Local<Vec<crate::core::body_contact::ContactGroup>>,
+    mut supports: Local<Vec<Vec<bool>>>,
+    mut bodies: Query<(Entity, &SoftBody, &mut BodySim, &mut SoftBodyStatus)>,
+) {
+    use crate::core::body_contact::{ContactGroup, GroupMember, overlapping_groups, swept_box};
+    if !clock.running() {
+        return;
+    }
+    let colliding = bodies
+        .iter()
+        .filter(|(_, _, bs, _)| {
+            bs.sim
+                .as_ref()
+                .is_some_and(|s| s.system.self_contact.is_some())
+        })
+        .count();
+    if colliding < 2 {
+        cache.clear(); // nothing to pair: no work, no allocation
+        return;
+    }
+    let mut all: Vec<_> = bodies.iter_mut().collect();
+    let boxes: Vec<_> = all
+        .iter()
+        .map(|(_, body, bs, _)| {
+            let sim = bs.sim.as_ref()?;
+            let sc = sim.system.self_contact.as_ref()?;
+            if body.paused || bs.diverged.is_some() || bs.frame_start.len() != sim.state.x.len() {
+                return None;
+            }
+            swept_box(
+                &sc.surface,
+                &bs.frame_start,
+                &sim.state.x,
+                sc.params.thickness as Scalar,
+            )
+        })
+        .collect();
+    let groups = overlapping_groups(&boxes);
+    if groups.is_empty() {
+        cache.clear();
+        return;
+    }
+    let mut used = vec![false; cache.len()];
+    for group in groups {
+        let key: Vec<u64> = group
+            .iter()
+            .flat_map(|&k| [all[k].0.to_bits(), all[k].3.rebuilds as u64])
+            .collect();
+        let slot = match cache.iter().position(|g| g.key() == key.as_slice()) {
+            Some(i) => i,
+            None => {
+                cache.push(ContactGroup::default());
+                used.push(false);
+                cache.len() - 1
+            }
+        };
+        used[slot] = true;
+        // Particles resting on a collider count heavier, as in a body's own passes.
+        supports.resize_with(group.len(), Vec::new);
+        for (m, &k) in group.iter().enumerate() {
+            let sim = all[k].2.sim.as_ref().expect("grouped bodies are built");
+            let sc = sim
+                .system
+                .self_contact
+                .as_ref()
+                .expect("grouped bodies collide");
+            let slack = 0.5 * sc.params.thickness as Scalar;
+            let support = &mut supports[m];
+            support.clear();
+            support.resize(sim.state.x.len(), false);
+            for c in &sim.system.colliders {
+                c.touching(sim.time, slack, &sim.state.x, support);
+            }
+        }
+        let h = all[group[0]].2.frame_dt as Scalar;
+        let mut members: Vec<GroupMember> = Vec::with_capacity(group.len());
+        let mut entities = Vec::with_capacity(group.len());
+        for (k, (e, _, bs, _)) in all.iter_mut().enumerate() {
+            let Ok(m) = group.binary_search(&k) else {
+                continue;
+            };
+            entities.push(*e);
+            let bs = &mut **bs;
+            let sim = bs.sim.as_mut().expect("grouped bodies are built");
+            let (system, state) = (&sim.system, &mut sim.state);
+            let sc = system
+                .self_contact
+                .as_ref()
+                .expect("grouped bodies collide");
+            members.push(GroupMember {
+                surface: &sc.surface,
+                params: sc.params,
+                x0: &bs.frame_start,
+                x: &mut state.x,
+                v: &mut state.v,
+                inv_mass: system.inv_mass(),
+                support: &supports[m],
+            });
+        }
+        let rep = cache[slot].resolve(&key, h, &mut members);
+        drop(members);
+        for &k in &group {
+            let status = &mut all[k].3;
+            status.contact_passes += 1;
+            if rep.failed {
+                status.contact_failed = true;
+            }
+        }
+        if rep.failed {
+            warn!(
+                "soft bodies {entities:?}: contact between them could not be separated within {} impact-zone iterations; their free surface particles were held where the frame began (free of intersections)",
+                crate::core::self_contact::ZONE_ITERATIONS
+            );
+        }
+    }
+    let mut i = 0;
+    cache.retain(|_| {
+        i += 1;
+        used[i - 1]
+    });
+}
+
+/// Tearing, after the frame is written back: the springs of [`Tearable`] bodies stretched
+/// past their limit break (their entities despawned), and the surface tears along them
+/// ([`crate::core::tear`]): each split particle gets a copy entity (same position and
+/// velocity, its share of the mass, the same pin), springs on the copy's side are moved to
+/// it, and the surface's triangles and texture coordinates follow. The body is rebuilt at
+/// the next step; a [`SoftBodyTorn`] names what broke.
+#[allow(clippy::type_complexity)]
+pub(super) fn tear(
+    mut bodies: Query<(
+        Entity,
+        &Tearable,
+        &mut BodySim,
+        Option<&mut crate::render::SoftBodySurface>,
+        Has<crate::ecs::SoftBodyMeshSurface>,
+    )>,
+    mut particles: Query<(&mut Particle, Option<&Pinned>)>,
+    mut springs: Query<&mut Spring>,
+    mut torn_msgs: MessageWriter<SoftBodyTorn>,
+    mut commands: Commands,
+) {
+    use crate::core::tear::{TearMesh, by_strain, overstretched};
+    for (body_e, tearable, mut bs, surface, mesh_surface) in &mut bodies {
+        let bs = &mut *bs;
+        let params = tearable.params();
+        if bs.torn || bs.diverged.is_some() || params.validate().is_err() {
+            continue;
+        }
+        let Some(sim) = bs.sim.as_ref() else { continue };
+        if !sim.state.is_finite() {
+            continue;
+        }
+        let packed = sim.system.springs.as_slice();
+        let over = overstretched(
+            packed.iter().map(|s| ([s.i, s.j], s.rest)),
+            &sim.state.x,
+            params.max_strain,
+        );
+        if over.is_empty() {
+            continue;
+        }
+        let mut mesh = TearMesh {
+            springs: packed.iter().map(|s| [s.i, s.j]).collect(),
+            triangles: surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
+        };
+        let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
+        let torn = mesh.tear(&by_strain(&over), &sim.state.x, &mut mass);
+        let n = bs.particles.len();
+        // The particle each index copies, back to one the model has.
+        let mut origin: Vec<usize> = (0..n).collect();
+        let mut entity = bs.particles.clone();
+        let mut split = Vec::with_capacity(torn.copies.len());
+        for &(parent, m) in &torn.copies {
+            let root = origin[parent as usize];
+            let (x, v) = (sim.state.x[root].to_f32(), sim.state.v[root].to_f32());
+            let pin = particles
+                .get(entity[parent as usize])
+                .ok()
+                .and_then(|(_, pin)| pin.cloned());
+            let mut ec = commands.spawn((
+                Particle {
+                    position: x,
+                    velocity: v,
+                    mass: m as f32,
+                },
+                ParticleOf(body_e),
+            ));
+            if let Some(pin) = pin {
+                ec.insert(pin);
+            }
+            let copy = ec.id();
+            split.push((entity[parent as usize], copy));
+            origin.push(root);
+            entity.push(copy);
+        }
+        for (i, &e) in bs.particles.iter().enumerate() {
+            if let Ok((mut p, _)) = particles.get_mut(e)
+                && (mass[i] as f32) != p.mass
+            {
+                p.mass = mass[i] as f32;
+            }
+        }
+        for &(k, [a, b]) in &torn.moved {
+            if let Some(&se) = bs.packed_springs.get(k)
+                && let Ok(mut s) = springs.get_mut(se)
+            {
+                s.a = entity[a as usize];
+                s.b = entity[b as usize];
+            }
+        }
+        let broken: Vec<Entity> = torn
+            .broken
+            .iter()
+            .filter_map(|&k| bs.packed_springs.get(k).copied())
+            .collect();
+        for &se in &broken {
+            commands.entity(se).despawn();
+        }
+        if let Some(mut surf) = surface
+            && !torn.copies.is_empty()
+        {
+            let surf = &mut *surf;
+            surf.triangles = mesh.triangles;
+            if surf.uvs.len() == n {
+                for &(parent, _) in &torn.copies {
+                    let uv = surf.uvs[parent as usize];
+                    surf.uvs.push(uv);
+                }
+            }
+            commands
+                .entity(body_e)
+                .remove::<crate::render::SurfaceVertices>();
+        }
+        if mesh_surface && !torn.copies.is_empty() {
+            warn_once!(
+                "soft body {body_e}: Tearable with a SoftBodyMeshSurface: the physics tears, but the game's mesh is drawn whole (only a SoftBodySurface is split)"
+            );
+        }
+        bs.torn = true;
+        let event = SoftBodyTorn {
+            body: body_e,
+            springs: broken,
+            split,
+        };
+        commands.trigger(event.clone());
+        torn_msgs.write(event);
     }
 }

@@ -1,0 +1,331 @@
+//! Tearing: springs stretched past a strain limit break, and the surface tears along them.
+//!
+//! At the end of a frame every spring's strain `|xₐ − x_b| / L₀ − 1` is compared with the
+//! limit, and the springs over it are removed, the most strained first. A broken spring that
+//! lies along a surface edge also tears the surface there: one of its ends (the one with more
+//! triangles around it) is split by the plane through it square to the broken edge (Müller et
+//! al., *Position Based Dynamics*, 2006, §4.5 — tearing by splitting a vertex along the plane
+//! perpendicular to an overstretched edge). The triangles around the vertex whose centres lie
+//! on the far side go to a copy of the particle — same position, velocity and texture
+//! coordinate, and the share of its mass that those triangles lump onto it (a third of each
+//! triangle's area, as a lumped mass matrix does), so momentum is kept exactly — and so do
+//! the vertex's springs whose other end lies on the far side. The cut follows the mesh's
+//! edges (nothing is re-meshed): pulled apart, a cloth tears square to the pull, one vertex
+//! per broken edge, and a tear running across a strip adds one particle per vertex it passes.
+//!
+//! Springs that cross a cut without touching the split vertex (bending springs, the other
+//! shear diagonal) are not cut by it: they stretch as the cut opens and break by their own
+//! strain a moment later. Springs off the surface (a rope) just break.
+//!
+//! Tearing is checked once per frame (a frame is the unit in which a body's layout changes);
+//! a spring pulled fast can overshoot the limit within the frame by its strain rate times the
+//! frame's length.
+
+use crate::core::driver::Simulation;
+use crate::core::ode::ParticleState;
+use crate::core::particles::ParticleModel;
+use crate::core::scene::{Scene, SceneError};
+use crate::math::{Scalar, Vector, VectorExt};
+use serde::{Deserialize, Serialize};
+
+/// When springs break.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TearParams {
+    /// Strain at which a spring breaks (`0.5`: at 1.5 times its rest length). Positive.
+    pub max_strain: f64,
+}
+
+impl Default for TearParams {
+    fn default() -> Self {
+        Self { max_strain: 0.5 }
+    }
+}
+
+impl TearParams {
+    /// Checks the limit: `Err((field, message))`.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if !(self.max_strain.is_finite() && self.max_strain > 0.0) {
+            return Err((
+                "max_strain",
+                format!(
+                    "must be positive and finite (a strain: 0.5 breaks a spring at 1.5 times its rest length), got {}",
+                    self.max_strain
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The springs stretched past `max_strain` at positions `x`, ascending, each with its strain
+/// (springs given as ends and rest length; a rest length that is not positive never breaks).
+pub fn overstretched(
+    springs: impl IntoIterator<Item = ([u32; 2], Scalar)>,
+    x: &[Vector],
+    max_strain: f64,
+) -> Vec<(usize, f64)> {
+    springs
+        .into_iter()
+        .enumerate()
+        .filter_map(|(k, ([a, b], rest))| {
+            let (a, b) = (a as usize, b as usize);
+            if rest <= 0.0 || a >= x.len() || b >= x.len() {
+                return None;
+            }
+            let strain = (x[a] - x[b]).length() as f64 / rest as f64 - 1.0;
+            (strain > max_strain).then_some((k, strain))
+        })
+        .collect()
+}
+
+/// What a tear changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Torn {
+    /// Springs that broke (strain over the limit), ascending.
+    pub broken: Vec<usize>,
+    /// Springs whose ends moved to a copy: (spring, new ends), ascending by spring.
+    pub moved: Vec<(usize, [u32; 2])>,
+    /// New particles, in order (the first gets index `n`, the particle count before): the
+    /// particle each copies, and its mass.
+    pub copies: Vec<(u32, f64)>,
+}
+
+impl Torn {
+    /// Nothing changed.
+    pub fn is_empty(&self) -> bool {
+        self.broken.is_empty() && self.copies.is_empty()
+    }
+}
+
+fn area(x: &[Vector], t: &[u32; 3]) -> f64 {
+    let [a, b, c] = t.map(|i| x[i as usize]);
+    0.5 * (b - a).cross(c - a).length() as f64
+}
+
+/// The springs of [`overstretched`]'s list, most strained first (ties: lower index first).
+pub fn by_strain(over: &[(usize, f64)]) -> Vec<usize> {
+    let mut o = over.to_vec();
+    o.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    o.into_iter().map(|(k, _)| k).collect()
+}
+
+/// A body's connectivity as tearing changes it: its springs' ends and its surface triangles.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TearMesh {
+    /// Each spring's ends.
+    pub springs: Vec<[u32; 2]>,
+    /// Surface triangles.
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TearMesh {
+    /// Breaks the springs `broken` (indices into [`TearMesh::springs`], most strained
+    /// first) and tears the surface along them at positions `x` (see the module docs).
+    /// Appends the copies' masses to `mass` (taking them from their originals) and renumbers
+    /// the triangles and spring ends in place. Broken springs stay in the list (the caller
+    /// drops the ones named in the result), so spring indices stay valid.
+    pub fn tear(&mut self, broken: &[usize], x: &[Vector], mass: &mut Vec<f64>) -> Torn {
+        let mut torn = Torn::default();
+        let mut x = x.to_vec();
+        let mut vt: Vec<Vec<usize>> = vec![vec![]; x.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for &c in tri {
+                if let Some(l) = vt.get_mut(c as usize) {
+                    l.push(t);
+                }
+            }
+        }
+        let mut at: Vec<Vec<usize>> = vec![vec![]; x.len()];
+        for (k, s) in self.springs.iter().enumerate() {
+            for &c in s {
+                if let Some(l) = at.get_mut(c as usize) {
+                    l.push(k);
+                }
+            }
+        }
+        let mut removed = vec![false; self.springs.len()];
+        for &k in broken {
+            if k >= self.springs.len() || removed[k] {
+                continue;
+            }
+            removed[k] = true;
+            torn.broken.push(k);
+            let [a, b] = self.springs[k];
+            let on_surface = vt
+                .get(a as usize)
+                .is_some_and(|l| l.iter().any(|&t| self.triangles[t].contains(&b)));
+            if !on_surface {
+                continue;
+            }
+            let (v, w) = if vt[b as usize].len() > vt[a as usize].len() {
+                (b, a)
+            } else {
+                (a, b)
+            };
+            let d = x[w as usize] - x[v as usize];
+            self.split(v, d, &mut x, mass, &mut vt, &mut at, &removed, &mut torn);
+        }
+        torn.broken.sort_unstable();
+        torn.moved.sort_by_key(|m| m.0);
+        // A spring moved twice: its last ends.
+        let mut last: Vec<(usize, [u32; 2])> = vec![];
+        for m in torn.moved.drain(..) {
+            match last.last_mut() {
+                Some(l) if l.0 == m.0 => *l = (m.0, self.springs[m.0]),
+                _ => last.push((m.0, self.springs[m.0])),
+            }
+        }
+        torn.moved = last.into_iter().filter(|(k, _)| !removed[*k]).collect();
+        torn
+    }
+
+    /// Splits vertex `v` by the plane through it square to `d` (see the module docs).
+    #[allow(clippy::too_many_arguments)]
+    fn split(
+        &mut self,
+        v: u32,
+        d: Vector,
+        x: &mut Vec<Vector>,
+        mass: &mut Vec<f64>,
+        vt: &mut Vec<Vec<usize>>,
+        at: &mut Vec<Vec<usize>>,
+        removed: &[bool],
+        torn: &mut Torn,
+    ) {
+        let xv = x[v as usize];
+        let far_side = |p: Vector| (p - xv).dot(d) > 0.0;
+        let (far, near): (Vec<usize>, Vec<usize>) = vt[v as usize].iter().partition(|&&t| {
+            let c = self.triangles[t].map(|i| x[i as usize]);
+            far_side((c[0] + c[1] + c[2]) / 3.0)
+        });
+        if far.is_empty() || near.is_empty() {
+            return;
+        }
+        let a_far: f64 = far.iter().map(|&t| area(x, &self.triangles[t])).sum();
+        let a_near: f64 = near.iter().map(|&t| area(x, &self.triangles[t])).sum();
+        // A degenerate side still gets a little mass (a free particle must have some).
+        let share = if a_far + a_near > 0.0 {
+            (a_far / (a_far + a_near)).clamp(1e-3, 1.0 - 1e-3)
+        } else {
+            0.5
+        };
+        let m0 = mass[v as usize];
+        let new = mass.len() as u32;
+        mass.push(m0 * share);
+        mass[v as usize] = m0 * (1.0 - share);
+        x.push(xv);
+        torn.copies.push((v, m0 * share));
+        for &t in &far {
+            for c in &mut self.triangles[t] {
+                if *c == v {
+                    *c = new;
+                }
+            }
+        }
+        vt[v as usize] = near;
+        vt.push(far);
+        let mut mine = vec![];
+        at[v as usize].retain(|&k| {
+            let [a, b] = self.springs[k];
+            let other = if a == v { b } else { a };
+            if removed[k] || !far_side(x[other as usize]) {
+                return true;
+            }
+            self.springs[k] = if a == v { [new, b] } else { [a, new] };
+            torn.moved.push((k, self.springs[k]));
+            mine.push(k);
+            false
+        });
+        at.push(mine);
+    }
+}
+
+/// Tears a scene's body after a frame of `sim` (made from the scene): the springs over the
+/// scene's [`Scene::tearing`] limit break, the surface tears along them, and — when anything
+/// changed — the scene takes the state's positions and velocities, the new particles and
+/// the new springs and triangles, and `sim` is rebuilt from it at the same time (its
+/// [`Simulation::replace`]). Returns what changed, in the scene's numbering before the
+/// call (spring indices) and after it (new particles are appended in order).
+pub fn tear_scene(
+    scene: &mut Scene,
+    sim: &mut Simulation<ParticleState, ParticleModel>,
+) -> Result<Torn, SceneError> {
+    let Some(params) = scene.tearing else {
+        return Ok(Torn::default());
+    };
+    let rest: Vec<f64> = (0..scene.springs.len())
+        .map(|k| scene.rest_length(k))
+        .collect();
+    let broken = overstretched(
+        scene
+            .springs
+            .iter()
+            .zip(&rest)
+            .map(|(s, &l)| ([s.a as u32, s.b as u32], l as Scalar)),
+        &sim.state.x,
+        params.max_strain,
+    );
+    if broken.is_empty() {
+        return Ok(Torn::default());
+    }
+    // Rest lengths fixed before the positions move to the current state.
+    for (sp, l) in scene.springs.iter_mut().zip(&rest) {
+        sp.rest_length = Some(*l);
+    }
+    let mut mesh = TearMesh {
+        springs: scene
+            .springs
+            .iter()
+            .map(|s| [s.a as u32, s.b as u32])
+            .collect(),
+        triangles: scene
+            .surface
+            .as_ref()
+            .map_or(vec![], |s| s.triangles.clone()),
+    };
+    let mut mass: Vec<f64> = scene.particles.iter().map(|p| p.mass).collect();
+    let torn = mesh.tear(&by_strain(&broken), &sim.state.x, &mut mass);
+    for (i, p) in scene.particles.iter_mut().enumerate() {
+        p.position = sim.state.x[i].to_f64();
+        p.velocity = sim.state.v[i].to_f64();
+        p.mass = mass[i];
+    }
+    for &(parent, m) in &torn.copies {
+        let mut q = scene.particles[parent as usize].clone();
+        q.mass = m;
+        let new = scene.particles.len();
+        scene.particles.push(q);
+        let copied: Vec<_> = scene
+            .motions
+            .iter()
+            .filter(|d| d.particle == parent as usize)
+            .cloned()
+            .collect();
+        for mut d in copied {
+            d.particle = new;
+            scene.motions.push(d);
+        }
+        if let Some(s) = &mut scene.surface
+            && !s.uvs.is_empty()
+        {
+            let uv = s.uvs[parent as usize];
+            s.uvs.push(uv);
+        }
+    }
+    for (k, [a, b]) in &torn.moved {
+        scene.springs[*k].a = *a as usize;
+        scene.springs[*k].b = *b as usize;
+    }
+    let mut k = 0;
+    scene.springs.retain(|_| {
+        k += 1;
+        torn.broken.binary_search(&(k - 1)).is_err()
+    });
+    if let Some(s) = &mut scene.surface {
+        s.triangles = mesh.triangles;
+    }
+    let (model, state) = scene.build()?;
+    sim.replace(model, state);
+    Ok(torn)
+}

@@ -1,0 +1,318 @@
+//! Tearing: springs break past their strain limit and the surface splits along the cut. The
+//! strains are recomputed here from the positions and the rest lengths, apart from the code
+//! that tears; the pieces are found by a union–find over the springs and the triangles.
+
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
+mod common;
+
+use bevy_soft_body::core::build::{ClothParams, ClothPins, cloth};
+use bevy_soft_body::core::scene::MotionDesc;
+use bevy_soft_body::core::tear::{TearParams, tear_scene};
+use bevy_soft_body::prelude::*;
+
+const ROWS: usize = 4;
+const COLS: usize = 25;
+/// The column whose lengthwise springs (to the next column) are half as stiff: in series with
+/// the others they take twice the strain, so the strip must tear there.
+const WEAK: usize = 12;
+const LIMIT: f64 = 0.3;
+
+/// A 4 × 25 strip, 2.4 m long (10 cm cells), lying flat without gravity; its end columns are
+/// pulled apart at 0.5 m/s each. Lengthwise springs from column 12 to 13 are half as stiff.
+fn strip() -> (Scene, ClothParams) {
+    let p = ClothParams {
+        rows: ROWS,
+        cols: COLS,
+        width: 2.4,
+        height: 0.3,
+        mass: 0.01,
+        k_structural: 200.0,
+        k_shear: 80.0,
+        k_flex: 2.0,
+        damping: 0.05,
+        drag: 0.0,
+        pins: ClothPins::None,
+        hanging: false,
+        origin: [0.0, 1.0, 0.0],
+    };
+    let mut s = cloth(&p).unwrap();
+    s.gravity = [0.0; 3];
+    for sp in &mut s.springs {
+        let (a, b) = (sp.a.min(sp.b), sp.a.max(sp.b));
+        if a % COLS == WEAK && b == a + 1 {
+            sp.stiffness *= 0.5;
+        }
+    }
+    for i in 0..ROWS {
+        for (j, vx) in [(0, -0.5), (COLS - 1, 0.5)] {
+            let k = p.index_of(i, j);
+            s.motions.push(MotionDesc {
+                particle: k,
+                motion: Motion::Linear {
+                    start: s.particles[k].position,
+                    velocity: [vx, 0.0, 0.0],
+                    t0: 0.0,
+                },
+            });
+        }
+    }
+    s.tearing = Some(TearParams { max_strain: LIMIT });
+    (s, p)
+}
+
+fn strains(scene: &Scene, x: &[Vector]) -> Vec<f64> {
+    (0..scene.springs.len())
+        .map(|k| {
+            let s = &scene.springs[k];
+            let d = x[s.a] - x[s.b];
+            (d.length() as f64) / scene.rest_length(k) - 1.0
+        })
+        .collect()
+}
+
+fn momentum(mass: &[f64], v: &[Vector]) -> [f64; 3] {
+    let mut p = [0.0; 3];
+    for (m, v) in mass.iter().zip(v) {
+        for c in 0..3 {
+            p[c] += m * v[c] as f64;
+        }
+    }
+    p
+}
+
+/// Union–find roots of the particles joined by `links`.
+fn pieces(n: usize, links: impl Iterator<Item = (usize, usize)>) -> Vec<usize> {
+    let mut p: Vec<usize> = (0..n).collect();
+    fn root(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for (a, b) in links {
+        let (ra, rb) = (root(&mut p, a), root(&mut p, b));
+        p[ra.max(rb)] = ra.min(rb);
+    }
+    (0..n).map(|i| root(&mut p, i)).collect()
+}
+
+#[test]
+fn a_strip_pulled_at_both_ends_tears_where_the_strain_first_exceeds_the_limit() {
+    let (mut scene, p) = strip();
+    let (model, state) = scene.build().unwrap();
+    let mut sim = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::SymplecticEuler,
+            // h·2√(k/m) = 1e-3 · 2√(200 / 0.01) = 0.28.
+            policy: StepPolicy::Fixed { h: 1e-3 },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        },
+    );
+    let n0 = scene.particles.len();
+    let mut first: Option<(u64, Vec<usize>)> = None;
+    let mut separated_at = None;
+    for _ in 0..240 {
+        sim.advance_frame().unwrap();
+        assert!(sim.state.is_finite(), "NaN at frame {}", sim.frame);
+        let over: Vec<usize> = strains(&scene, &sim.state.x)
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| **s > LIMIT)
+            .map(|(k, _)| k)
+            .collect();
+        let before = scene.clone();
+        let mass_before: Vec<f64> = scene.particles.iter().map(|q| q.mass).collect();
+        let p_before = momentum(&mass_before, &sim.state.v);
+        let torn = tear_scene(&mut scene, &mut sim).unwrap();
+        assert_eq!(torn.broken, over, "frame {}", sim.frame);
+        if !over.is_empty() {
+            // Momentum kept: the copies share their originals' mass and velocity.
+            let mass: Vec<f64> = scene.particles.iter().map(|q| q.mass).collect();
+            let p_after = momentum(&mass, &sim.state.v);
+            for c in 0..3 {
+                assert!(
+                    (p_after[c] - p_before[c]).abs() <= 1e-6 * (1.0 + p_before[c].abs()),
+                    "momentum {p_before:?} → {p_after:?}"
+                );
+            }
+            if first.is_none() {
+                // The first springs to go are the weak column's lengthwise ones.
+                for &k in &over {
+                    let s = &before.springs[k];
+                    let (a, b) = (s.a.min(s.b), s.a.max(s.b));
+                    assert!(
+                        a % COLS == WEAK && b == a + 1,
+                        "spring {k} ({a}–{b}) broke first, not one of the weak column's"
+                    );
+                }
+                first = Some((sim.frame, over.clone()));
+            }
+        }
+        // Separated: the ends' particles in different pieces, by springs and by triangles.
+        let n = scene.particles.len();
+        let by_springs = pieces(n, scene.springs.iter().map(|s| (s.a, s.b)));
+        let tris = &scene.surface.as_ref().unwrap().triangles;
+        let by_tris = pieces(
+            n,
+            tris.iter()
+                .flat_map(|t| [(t[0], t[1]), (t[1], t[2])])
+                .map(|(a, b)| (a as usize, b as usize)),
+        );
+        let (l, r) = (p.index_of(0, 0), p.index_of(0, COLS - 1));
+        if by_tris[l] != by_tris[r] && separated_at.is_none() {
+            separated_at = Some(sim.frame);
+            // The surface tore along one column: one new vertex per row it crossed.
+            assert_eq!(n - n0, ROWS, "particles {n0} → {n}");
+            assert_eq!(scene.surface.as_ref().unwrap().uvs.len(), n);
+        }
+        if by_springs[l] != by_springs[r] {
+            break;
+        }
+    }
+    let (frame, over) = first.expect("the strip never tore");
+    let cut_frame = separated_at.expect("the surface never came apart");
+    println!(
+        "first break at frame {frame} ({} springs), surface apart at frame {cut_frame}, springs apart at frame {}; {} particles (was {n0})",
+        over.len(),
+        sim.frame,
+        scene.particles.len()
+    );
+    // The body goes on: the two halves fly apart with their pulled ends.
+    for _ in 0..60 {
+        sim.advance_frame().unwrap();
+        tear_scene(&mut scene, &mut sim).unwrap();
+        assert!(sim.state.is_finite());
+    }
+    let n = scene.particles.len();
+    let by_springs = pieces(n, scene.springs.iter().map(|s| (s.a, s.b)));
+    assert_ne!(
+        by_springs[p.index_of(0, 0)],
+        by_springs[p.index_of(0, COLS - 1)]
+    );
+}
+
+#[test]
+fn a_tearing_limit_that_is_not_positive_names_the_field() {
+    for bad in [0.0, -0.5, f64::NAN, f64::INFINITY] {
+        let (mut scene, _) = strip();
+        scene.tearing = Some(TearParams { max_strain: bad });
+        let err = scene.build().unwrap_err();
+        assert!(
+            err.errors.iter().any(|e| e.path == "tearing.max_strain"),
+            "{bad}: {err:?}"
+        );
+    }
+    // And from a file: the key is `tearing`.
+    let (scene, _) = strip();
+    let json = serde_json::to_string(&scene).unwrap();
+    assert!(json.contains("\"tearing\":{\"max_strain\":0.3}"));
+    let bad = json.replace("\"max_strain\":0.3", "\"max_strain\":-1.0");
+    let parsed: Scene = serde_json::from_str(&bad).unwrap();
+    assert!(parsed.build().is_err());
+}
+
+#[cfg(feature = "plugin")]
+mod plugin {
+    use super::*;
+    use bevy::prelude::*;
+    use bevy_soft_body::ecs::BodySim;
+    use common::spawn;
+
+    /// The strip as one body in a headless app at 1/64 s frames: it tears where the core's
+    /// strip tears, the components follow (particles added, broken springs despawned, the
+    /// surface renumbered), a `SoftBodyTorn` names what broke, and the body goes on.
+    #[test]
+    fn a_tearable_body_tears_in_the_plugin() {
+        let (scene, _) = strip();
+        let mut app = common::headless_app(1.0 / 64.0);
+        let body = spawn(
+            &mut app,
+            &scene,
+            SoftBody {
+                integrator: IntegratorKind::SymplecticEuler,
+                step: StepPolicy::Fixed { h: 1e-3 },
+                ..Default::default()
+            },
+        );
+        assert_eq!(
+            app.world().get::<Tearable>(body).map(|t| t.max_strain),
+            Some(LIMIT as f32)
+        );
+        let n0 = scene.particles.len();
+        let springs0 = scene.springs.len();
+        let mut torn: Vec<SoftBodyTorn> = vec![];
+        for _ in 0..240 {
+            app.update();
+            let msgs = app.world().resource::<Messages<SoftBodyTorn>>();
+            torn.extend(msgs.iter_current_update_messages().cloned());
+            let world = app.world();
+            for p in world.get::<BodyParticles>(body).unwrap().iter() {
+                let p = world.get::<Particle>(p).unwrap();
+                assert!(p.position.is_finite() && p.velocity.is_finite());
+            }
+        }
+        let world = app.world();
+        assert!(!torn.is_empty(), "never tore");
+        let first = &torn[0];
+        assert_eq!(first.body, body);
+        // The first springs to break are the weak column's lengthwise ones (their entities
+        // are gone); the split particles are the weak column's.
+        assert!(!first.springs.is_empty());
+        for e in &first.springs {
+            assert!(
+                world.get_entity(*e).is_err(),
+                "broken spring {e} still there"
+            );
+        }
+        let split: usize = torn.iter().map(|t| t.split.len()).sum();
+        let particles = world.get::<BodyParticles>(body).unwrap().len();
+        assert_eq!(split, ROWS, "one new particle per row the cut crossed");
+        assert_eq!(particles, n0 + ROWS);
+        let broken: usize = torn.iter().map(|t| t.springs.len()).sum();
+        assert_eq!(
+            world.get::<BodySprings>(body).unwrap().len(),
+            springs0 - broken
+        );
+        let surf = world.get::<SoftBodySurface>(body).unwrap();
+        assert!(
+            surf.triangles
+                .iter()
+                .flatten()
+                .all(|&i| (i as usize) < particles)
+        );
+        assert_eq!(surf.uvs.len(), particles);
+        let bs = world.get::<BodySim>(body).unwrap();
+        assert_eq!(bs.simulation().unwrap().state.x.len(), particles);
+        let status = world.get::<SoftBodyStatus>(body).unwrap();
+        assert_eq!(status.state, BodyState::Running);
+        println!(
+            "plugin: {} tears, {broken} springs broken, {split} particles split",
+            torn.len()
+        );
+    }
+
+    #[test]
+    fn a_bad_tearing_limit_names_the_body() {
+        let (scene, _) = strip();
+        let mut app = common::headless_app(1.0 / 64.0);
+        let body = spawn(&mut app, &scene, SoftBody::default());
+        app.world_mut()
+            .entity_mut(body)
+            .insert(Tearable { max_strain: 0.0 });
+        app.update();
+        let status = app.world().get::<SoftBodyStatus>(body).unwrap();
+        let BodyState::Invalid(msg) = &status.state else {
+            panic!("not refused: {:?}", status.state);
+        };
+        assert!(
+            msg.contains(&format!("{body}")) && msg.contains("Tearable max_strain"),
+            "{msg}"
+        );
+    }
+}
