@@ -2,6 +2,7 @@
 """Checks a cloth_sphere screenshot: the cloth and the sphere must both be visible.
 With `--cape`, checks the gltf_cape screenshot (see `cape` below); with `--playground`, the
 avian_playground screenshot (see `playground`).
+With `--tear`, the tearing screenshot (see `tear`).
 With `--body`, checks a finite-element screenshot (fem_bunny, fem_armadillo) instead: the
 skinned display mesh's beige (sRGB 0.78, 0.72, 0.62), lit — red ≥ green ≥ blue, red 12–70
 above blue, red > 120 — must cover more than 3 % of the frame right of the panel (10.9 % in
@@ -115,6 +116,42 @@ def cape(path):
     return 0
 
 
+def tear(path):
+    """tearing at t = 2.5 s: the curtain's red (sRGB 0.80, 0.30, 0.25), lit, must cover more
+    than 5 % of the frame right of the panel, and be torn: at least 20 rows in which a run of
+    10 or more background pixels (all channels under 50; the clear colour is sRGB 0.09, 0.10,
+    0.12) lies between red on both sides. docs/tearing.png: 24 % red, torn in 167 rows; the
+    curtain still whole at t = 0.25 s: 23 % red, 6 rows (its slanted top edge)."""
+    w, h, bpp, rows = read_png(path)
+    hits = total = torn_rows = 0
+    for line in rows:
+        red = []
+        dark = []
+        for x in range(380, w):
+            r, g, b = line[x * bpp], line[x * bpp + 1], line[x * bpp + 2]
+            total += 1
+            is_red = r > 90 and r > 1.6 * g and r > 1.6 * b
+            hits += is_red
+            red.append(is_red)
+            dark.append(r < 50 and g < 50 and b < 50)
+        if not any(red):
+            continue
+        first = red.index(True)
+        last = len(red) - 1 - red[::-1].index(True)
+        run = best = 0
+        for i in range(first, last + 1):
+            run = run + 1 if dark[i] else 0
+            best = max(best, run)
+        torn_rows += best >= 10
+    share = 100 * hits / total
+    print(f"{path}: {w}x{h}, curtain {share:.2f} % of the frame right of the panel, "
+          f"torn in {torn_rows} rows")
+    if share <= 5.0 or torn_rows < 20:
+        print("FAIL: the curtain needs > 5 % of those pixels and a hole in at least 20 rows")
+        return 1
+    return 0
+
+
 def playground(path):
     """avian_playground at t = 4.5 s: the soft bodies' red (the default surface, sRGB 0.85,
     0.25, 0.22) must cover more than 3 % of the frame between the two panels (x 350–960), and
@@ -144,6 +181,8 @@ def playground(path):
 
 
 if __name__ == "__main__":
+    if sys.argv[1] == "--tear":
+        sys.exit(tear(sys.argv[2]))
     if sys.argv[1] == "--playground":
         sys.exit(playground(sys.argv[2]))
     if sys.argv[1] == "--body":

@@ -5,10 +5,13 @@
 //! ```text
 //! cargo run --release --example cloth_pile
 //! cargo run --release --example cloth_pile -- --bench     # headless: cost of a step, table
+//! cargo run --release --example cloth_pile -- --bodies    # the pile as three bodies only
 //! ```
 //!
 //! The three cloths are one body (`Scene::append`), so their surfaces collide with each other
-//! as well as with themselves. Keys: Space pause, N step, R reset (drop again), G wireframe;
+//! as well as with themselves. (Separate bodies that each have `SelfCollision` collide with
+//! each other too, through one pass per frame after they have stepped; `--bench` compares the
+//! two.) Keys: Space pause, N step, R reset (drop again), G wireframe;
 //! left drag pulls a cloth, right drag or arrows orbit, wheel zoom. `--screenshot FILE
 //! [--frames N]` renders N frames (default 150: piled at 2.5 s), saves a PNG and exits.
 
@@ -27,6 +30,11 @@ use bevy::prelude::*;
 
 fn main() {
     let argv: Vec<String> = std::env::args().collect();
+    if argv.iter().any(|a| a == "--bodies") {
+        // The separate-bodies row alone (`PER_FRAME=1`: each group pass's cost on stderr).
+        bench_bodies(180);
+        return;
+    }
     if argv.iter().any(|a| a == "--bench") {
         bench(argv.iter().any(|a| a == "--quick"));
         return;
@@ -129,4 +137,122 @@ fn bench(quick: bool) {
             );
         }
     }
+    bench_bodies(frames as u32);
+}
+
+/// Cloth `k` of a pile of `n × n` cloths as a scene of its own (its particles, springs and
+/// triangles, renumbered).
+fn cloth_of(pile: &Scene, n: usize, k: usize) -> Scene {
+    let (lo, hi) = (k * n * n, (k + 1) * n * n);
+    let mut s = pile.clone();
+    s.particles = pile.particles[lo..hi].to_vec();
+    s.springs = pile
+        .springs
+        .iter()
+        .filter(|sp| (lo..hi).contains(&sp.a) && (lo..hi).contains(&sp.b))
+        .map(|sp| {
+            let mut sp = sp.clone();
+            sp.a -= lo;
+            sp.b -= lo;
+            sp
+        })
+        .collect();
+    let surf = s.surface.as_mut().expect("the pile has a surface");
+    surf.triangles
+        .retain(|t| t.iter().all(|&i| (lo..hi).contains(&(i as usize))));
+    for t in &mut surf.triangles {
+        *t = t.map(|i| i - lo as u32);
+    }
+    if !surf.uvs.is_empty() {
+        surf.uvs = surf.uvs[lo..hi].to_vec();
+    }
+    s
+}
+
+/// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with one
+/// contact pass per frame between them (`core::body_contact`, what the plugin runs after its
+/// step), against the same pile as one body.
+fn bench_bodies(frames: u32) {
+    use bevy_soft_body::core::body_contact::{
+        ContactGroup, GroupMember, overlapping_groups, swept_box,
+    };
+    let p = ClothPileParams::default();
+    let pile = cloth_pile(&p).expect("valid pile");
+    let config = DriverConfig {
+        integrator: IntegratorKind::SymplecticEuler,
+        policy: StepPolicy::Fixed { h: p.stable_step() },
+        frame_dt: 1.0 / 60.0,
+        ..Default::default()
+    };
+    let n = p.resolution;
+    let mut sims: Vec<_> = (0..p.cloths)
+        .map(|k| {
+            let (model, state) = cloth_of(&pile, n, k).build().expect("valid scene");
+            Simulation::new(model, state, config)
+        })
+        .collect();
+    let mut group = ContactGroup::default();
+    let (mut steps, mut step_wall, mut group_wall, mut passes) =
+        (0u64, Duration::ZERO, Duration::ZERO, 0u32);
+    let mut rep = SelfContactReport::default();
+    for _ in 0..frames {
+        let x0: Vec<Vec<_>> = sims.iter().map(|s| s.state.x.clone()).collect();
+        let t = Instant::now();
+        for s in &mut sims {
+            steps += s.advance_frame().expect("stable").substeps as u64;
+        }
+        step_wall += t.elapsed();
+        let t = Instant::now();
+        let boxes: Vec<_> = sims
+            .iter()
+            .zip(&x0)
+            .map(|(s, x0)| {
+                let sc = s.system.self_contact.as_ref()?;
+                swept_box(&sc.surface, x0, &s.state.x, sc.params.thickness as Scalar)
+            })
+            .collect();
+        for g in overlapping_groups(&boxes) {
+            let key: Vec<u64> = g.iter().map(|&k| k as u64).collect();
+            let mut members: Vec<GroupMember> = vec![];
+            for (k, (s, x0)) in sims.iter_mut().zip(&x0).enumerate() {
+                if !g.contains(&k) {
+                    continue;
+                }
+                let (system, state) = (&s.system, &mut s.state);
+                let sc = system.self_contact.as_ref().expect("self-colliding");
+                members.push(GroupMember {
+                    surface: &sc.surface,
+                    params: sc.params,
+                    x0,
+                    x: &mut state.x,
+                    v: &mut state.v,
+                    inv_mass: system.inv_mass(),
+                    support: &[],
+                });
+            }
+            let r = group.resolve(&key, config.frame_dt as Scalar, &mut members);
+            if std::env::var("PER_FRAME").is_ok() {
+                eprintln!(
+                    "group pass: {} candidates, {:.1} ms",
+                    r.candidates,
+                    (r.broad + r.narrow).as_secs_f64() * 1e3
+                );
+            }
+            rep.add(&r);
+            passes += 1;
+        }
+        group_wall += t.elapsed();
+    }
+    let per_step = |d: Duration| d.as_secs_f64() * 1e6 / (steps as f64 / p.cloths as f64);
+    println!(
+        "| {} × {n}² as {} bodies | on (each) + between | {:.0} | {:.0} between | {:.0} | {:.2} group passes per frame | | | | {} | {} |",
+        p.cloths,
+        p.cloths,
+        per_step(step_wall + group_wall),
+        per_step(group_wall),
+        per_step(rep.narrow),
+        passes as f64 / frames as f64,
+        rep.collisions,
+        rep.zones
+    );
 }
