@@ -120,7 +120,7 @@ def tear(path):
     """tearing at t = 2.5 s: the curtain's red (sRGB 0.80, 0.30, 0.25), lit, must cover more
     than 5 % of the frame right of the panel, and be torn: at least 20 rows in which a run of
     10 or more background pixels (all channels under 50; the clear colour is sRGB 0.09, 0.10,
-    0.12) lies between red on both sides. docs/tearing.png: 24 % red, torn in 167 rows; the
+    0.12) lies between red on both sides. docs/tearing.png: 24 % red, torn in 157 rows; the
     curtain still whole at t = 0.25 s: 23 % red, 6 rows (its slanted top edge)."""
     w, h, bpp, rows = read_png(path)
     hits = total = torn_rows = 0

@@ -1,21 +1,26 @@
 //! Tearing: springs stretched past a strain limit break, and the surface tears along them.
 //!
 //! At the end of a frame every spring's strain `|xₐ − x_b| / L₀ − 1` is compared with the
-//! limit, and the springs over it are removed, the most strained first. A broken spring that
-//! lies along a surface edge also tears the surface there: one of its ends (the one with more
-//! triangles around it) is split by the plane through it square to the broken edge (Müller et
-//! al., *Position Based Dynamics*, 2006, §4.5 — tearing by splitting a vertex along the plane
-//! perpendicular to an overstretched edge). The triangles around the vertex whose centres lie
-//! on the far side go to a copy of the particle — same position, velocity and texture
+//! limit, the most strained first. A spring past it that lies along a surface edge tears the
+//! surface there: one of its ends (the one with more triangles around it; the other if that
+//! one's triangles all lie on one side) is split by the plane through it square to the edge
+//! (Müller et al., *Position Based Dynamics*, 2006, §4.5 — tearing by splitting a vertex
+//! along the plane perpendicular to an overstretched edge). The triangles around the vertex
+//! that hold the edge or whose centres lie on the far side go to a copy of the particle — same position, velocity and texture
 //! coordinate, and the share of its mass that those triangles lump onto it (a third of each
 //! triangle's area, as a lumped mass matrix does), so momentum is kept exactly — and so do
-//! the vertex's springs whose other end lies on the far side. The cut follows the mesh's
+//! the vertex's springs whose other end lies on the far side, the stretched one among them
+//! (freed, it relaxes); an edge that lies on the cut (triangles on both sides) keeps its
+//! spring on the near side, and the far side's copy of the edge gets a spring of its own
+//! with the same settings. Springs past the limit off the surface, and surface springs whose
+//! ends cannot be split (the hole then loses the triangles on that edge), are removed. The
+//! cut follows the mesh's
 //! edges (nothing is re-meshed): pulled apart, a cloth tears square to the pull, one vertex
 //! per broken edge, and a tear running across a strip adds one particle per vertex it passes.
 //!
 //! Springs that cross a cut without touching the split vertex (bending springs, the other
 //! shear diagonal) are not cut by it: they stretch as the cut opens and break by their own
-//! strain a moment later. Springs off the surface (a rope) just break.
+//! strain a moment later. Springs of a body without a surface (a rope) just break.
 //!
 //! Tearing is checked once per frame (a frame is the unit in which a body's layout changes);
 //! a spring pulled fast can overshoot the limit within the frame by its strain rate times the
@@ -27,6 +32,9 @@ use crate::core::particles::ParticleModel;
 use crate::core::scene::{Scene, SceneError};
 use crate::math::{Scalar, Vector, VectorExt};
 use serde::{Deserialize, Serialize};
+
+/// The least share of a split particle's mass either side keeps.
+pub const MIN_SHARE: f64 = 0.25;
 
 /// When springs break.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -82,19 +90,25 @@ pub fn overstretched(
 /// What a tear changed.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Torn {
-    /// Springs that broke (strain over the limit), ascending.
+    /// Springs stretched past the limit, ascending.
+    pub over: Vec<usize>,
+    /// Springs removed, ascending: those past the limit that do not lie on a surface edge,
+    /// or whose edge could not be split (the others went with the split-off copy).
     pub broken: Vec<usize>,
     /// Springs whose ends moved to a copy: (spring, new ends), ascending by spring.
     pub moved: Vec<(usize, [u32; 2])>,
     /// New particles, in order (the first gets index `n`, the particle count before): the
     /// particle each copies, and its mass.
     pub copies: Vec<(u32, f64)>,
+    /// New springs, in order: the spring each copies (its settings) and its ends — the
+    /// split-off side's own spring along an edge that lies on the cut.
+    pub added: Vec<(usize, [u32; 2])>,
 }
 
 impl Torn {
     /// Nothing changed.
     pub fn is_empty(&self) -> bool {
-        self.broken.is_empty() && self.copies.is_empty()
+        self.over.is_empty()
     }
 }
 
@@ -113,15 +127,26 @@ pub fn by_strain(over: &[(usize, f64)]) -> Vec<usize> {
 /// A body's connectivity as tearing changes it: its springs' ends and its surface triangles.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TearMesh {
-    /// Each spring's ends.
+    /// Each spring's ends (springs a tear adds are appended).
     pub springs: Vec<[u32; 2]>,
     /// Surface triangles.
     pub triangles: Vec<[u32; 3]>,
+    /// For each spring added by the running tear, the spring it copies.
+    source: Vec<usize>,
 }
 
 impl TearMesh {
-    /// Breaks the springs `broken` (indices into [`TearMesh::springs`], most strained
-    /// first) and tears the surface along them at positions `x` (see the module docs).
+    /// A body's springs (their ends) and surface triangles.
+    pub fn new(springs: Vec<[u32; 2]>, triangles: Vec<[u32; 3]>) -> Self {
+        Self {
+            springs,
+            triangles,
+            source: vec![],
+        }
+    }
+
+    /// Tears at the springs `broken` (indices into [`TearMesh::springs`] of springs past the
+    /// limit, most strained first) at positions `x` (see the module docs).
     /// Appends the copies' masses to `mass` (taking them from their originals) and renumbers
     /// the triangles and spring ends in place. Broken springs stay in the list (the caller
     /// drops the ones named in the result), so spring indices stay valid.
@@ -144,29 +169,76 @@ impl TearMesh {
                 }
             }
         }
+        let n0 = self.springs.len();
+        self.source = (0..n0).collect();
         let mut removed = vec![false; self.springs.len()];
+        let mut dead = vec![false; self.triangles.len()];
         for &k in broken {
             if k >= self.springs.len() || removed[k] {
                 continue;
             }
-            removed[k] = true;
-            torn.broken.push(k);
+            torn.over.push(k);
             let [a, b] = self.springs[k];
             let on_surface = vt
                 .get(a as usize)
                 .is_some_and(|l| l.iter().any(|&t| self.triangles[t].contains(&b)));
-            if !on_surface {
-                continue;
+            if on_surface {
+                let (v, w) = if vt[b as usize].len() > vt[a as usize].len() {
+                    (b, a)
+                } else {
+                    (a, b)
+                };
+                // Split one end (or, when all its triangles lie on one side, the other): the
+                // edge goes with the far side, and its spring with it, no longer stretched
+                // once the copy is free to move.
+                if self.split(
+                    v,
+                    w,
+                    &mut x,
+                    mass,
+                    &mut vt,
+                    &mut at,
+                    &mut removed,
+                    &mut torn,
+                ) || self.split(
+                    w,
+                    v,
+                    &mut x,
+                    mass,
+                    &mut vt,
+                    &mut at,
+                    &mut removed,
+                    &mut torn,
+                ) {
+                    continue;
+                }
+                // Neither end can be split: the spring breaks and the triangles on its edge
+                // go (a small hole rather than a triangle that no spring holds).
+                let [a, b] = self.springs[k];
+                let on_edge: Vec<usize> = vt[a as usize]
+                    .iter()
+                    .copied()
+                    .filter(|&t| self.triangles[t].contains(&b))
+                    .collect();
+                for t in on_edge {
+                    dead[t] = true;
+                    for c in self.triangles[t] {
+                        vt[c as usize].retain(|&u| u != t);
+                    }
+                }
             }
-            let (v, w) = if vt[b as usize].len() > vt[a as usize].len() {
-                (b, a)
-            } else {
-                (a, b)
-            };
-            let d = x[w as usize] - x[v as usize];
-            self.split(v, d, &mut x, mass, &mut vt, &mut at, &removed, &mut torn);
+            removed[k] = true;
+            torn.broken.push(k);
+        }
+        if dead.iter().any(|&d| d) {
+            let mut k = 0;
+            self.triangles.retain(|_| {
+                k += 1;
+                !dead[k - 1]
+            });
         }
         torn.broken.sort_unstable();
+        torn.over.sort_unstable();
         torn.moved.sort_by_key(|m| m.0);
         // A spring moved twice: its last ends.
         let mut last: Vec<(usize, [u32; 2])> = vec![];
@@ -176,37 +248,51 @@ impl TearMesh {
                 _ => last.push((m.0, self.springs[m.0])),
             }
         }
-        torn.moved = last.into_iter().filter(|(k, _)| !removed[*k]).collect();
+        torn.moved = last
+            .into_iter()
+            .filter(|(k, _)| *k < n0 && !removed[*k])
+            .collect();
+        torn.added = (n0..self.springs.len())
+            .filter(|&k| !removed[k])
+            .map(|k| (self.source[k], self.springs[k]))
+            .collect();
+        self.source.clear();
         torn
     }
 
-    /// Splits vertex `v` by the plane through it square to `d` (see the module docs).
+    /// Splits vertex `v` by the plane through it square to the broken edge to `w` (see the
+    /// module docs); the triangles holding the edge go with `w`. False when all of `v`'s
+    /// triangles lie on one side (nothing to split).
     #[allow(clippy::too_many_arguments)]
     fn split(
         &mut self,
         v: u32,
-        d: Vector,
+        w: u32,
         x: &mut Vec<Vector>,
         mass: &mut Vec<f64>,
         vt: &mut Vec<Vec<usize>>,
         at: &mut Vec<Vec<usize>>,
-        removed: &[bool],
+        removed: &mut Vec<bool>,
         torn: &mut Torn,
-    ) {
+    ) -> bool {
         let xv = x[v as usize];
+        let d = x[w as usize] - xv;
         let far_side = |p: Vector| (p - xv).dot(d) > 0.0;
         let (far, near): (Vec<usize>, Vec<usize>) = vt[v as usize].iter().partition(|&&t| {
-            let c = self.triangles[t].map(|i| x[i as usize]);
-            far_side((c[0] + c[1] + c[2]) / 3.0)
+            let tri = self.triangles[t];
+            let c = tri.map(|i| x[i as usize]);
+            tri.contains(&w) || far_side((c[0] + c[1] + c[2]) / 3.0)
         });
         if far.is_empty() || near.is_empty() {
-            return;
+            return false;
         }
         let a_far: f64 = far.iter().map(|&t| area(x, &self.triangles[t])).sum();
         let a_near: f64 = near.iter().map(|&t| area(x, &self.triangles[t])).sum();
-        // A degenerate side still gets a little mass (a free particle must have some).
+        // Clamped to a quarter to three quarters: a sliver's tiny lumped mass on the same
+        // springs would raise the fastest frequency 2√(k/m) past what the body's step can
+        // carry (measured: a 1e-3 share made a torn flap blow up under symplectic Euler).
         let share = if a_far + a_near > 0.0 {
-            (a_far / (a_far + a_near)).clamp(1e-3, 1.0 - 1e-3)
+            (a_far / (a_far + a_near)).clamp(MIN_SHARE, 1.0 - MIN_SHARE)
         } else {
             0.5
         };
@@ -226,10 +312,30 @@ impl TearMesh {
         vt[v as usize] = near;
         vt.push(far);
         let mut mine = vec![];
+        let mut cut_edges = vec![];
+        let tris = &self.triangles;
+        let (near, far) = (&vt[v as usize], &vt[new as usize]);
         at[v as usize].retain(|&k| {
             let [a, b] = self.springs[k];
             let other = if a == v { b } else { a };
-            if removed[k] || !far_side(x[other as usize]) {
+            // An edge of the fan goes where all its triangles went; an edge with triangles on
+            // both sides lies on the cut: it stays, and the far side gets a spring of its own
+            // along its copy of the edge. Any other spring goes by its far end's side.
+            let with_far = far.iter().any(|&t| tris[t].contains(&other));
+            let with_near = near.iter().any(|&t| tris[t].contains(&other));
+            if removed[k] {
+                return true;
+            }
+            let moves = match (with_far, with_near) {
+                (true, false) => true,
+                (true, true) => {
+                    cut_edges.push((k, other));
+                    false
+                }
+                (false, true) => false,
+                (false, false) => far_side(x[other as usize]),
+            };
+            if !moves {
                 return true;
             }
             self.springs[k] = if a == v { [new, b] } else { [a, new] };
@@ -237,7 +343,16 @@ impl TearMesh {
             mine.push(k);
             false
         });
+        for (k, other) in cut_edges {
+            let added = self.springs.len();
+            self.springs.push([new, other]);
+            self.source.push(self.source.get(k).copied().unwrap_or(k));
+            removed.push(false);
+            at[other as usize].push(added);
+            mine.push(added);
+        }
         at.push(mine);
+        true
     }
 }
 
@@ -273,17 +388,17 @@ pub fn tear_scene(
     for (sp, l) in scene.springs.iter_mut().zip(&rest) {
         sp.rest_length = Some(*l);
     }
-    let mut mesh = TearMesh {
-        springs: scene
+    let mut mesh = TearMesh::new(
+        scene
             .springs
             .iter()
             .map(|s| [s.a as u32, s.b as u32])
             .collect(),
-        triangles: scene
+        scene
             .surface
             .as_ref()
             .map_or(vec![], |s| s.triangles.clone()),
-    };
+    );
     let mut mass: Vec<f64> = scene.particles.iter().map(|p| p.mass).collect();
     let torn = mesh.tear(&by_strain(&broken), &sim.state.x, &mut mass);
     for (i, p) in scene.particles.iter_mut().enumerate() {
@@ -317,10 +432,17 @@ pub fn tear_scene(
         scene.springs[*k].a = *a as usize;
         scene.springs[*k].b = *b as usize;
     }
+    let n_springs = scene.springs.len();
+    for &(k, [a, b]) in &torn.added {
+        let mut sp = scene.springs[k].clone();
+        sp.a = a as usize;
+        sp.b = b as usize;
+        scene.springs.push(sp);
+    }
     let mut k = 0;
     scene.springs.retain(|_| {
         k += 1;
-        torn.broken.binary_search(&(k - 1)).is_err()
+        k - 1 >= n_springs || torn.broken.binary_search(&(k - 1)).is_err()
     });
     if let Some(s) = &mut scene.surface {
         s.triangles = mesh.triangles;

@@ -650,7 +650,9 @@ pub struct SoftBodyTorn {
     /// The body's root entity.
     #[event_target]
     pub body: Entity,
-    /// The springs that broke (already despawned).
+    /// The springs that broke and were removed (already despawned): those past the limit off
+    /// the surface, or on an edge that could not be split. (A spring past the limit along a
+    /// surface edge stays, moved to the split-off particle, and relaxes.)
     pub springs: Vec<Entity>,
     /// The particles split: (the original, its new copy).
     pub split: Vec<(Entity, Entity)>,

@@ -328,10 +328,10 @@ pub(super) fn tear(
         if over.is_empty() {
             continue;
         }
-        let mut mesh = TearMesh {
-            springs: packed.iter().map(|s| [s.i, s.j]).collect(),
-            triangles: surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
-        };
+        let mut mesh = TearMesh::new(
+            packed.iter().map(|s| [s.i, s.j]).collect(),
+            surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
+        );
         let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
         let torn = mesh.tear(&by_strain(&over), &sim.state.x, &mut mass);
         let n = bs.particles.len();
@@ -377,6 +377,17 @@ pub(super) fn tear(
                 s.b = entity[b as usize];
             }
         }
+        // The split-off side's own springs along edges on the cut: copies of the originals.
+        for &(k, [a, b]) in &torn.added {
+            if let Some(&se) = bs.packed_springs.get(k)
+                && let Ok(s) = springs.get(se)
+            {
+                let mut copy = s.clone();
+                copy.a = entity[a as usize];
+                copy.b = entity[b as usize];
+                commands.spawn((copy, SpringOf(body_e)));
+            }
+        }
         let broken: Vec<Entity> = torn
             .broken
             .iter()
@@ -390,7 +401,9 @@ pub(super) fn tear(
         {
             let surf = &mut *surf;
             surf.triangles = mesh.triangles;
-            if surf.uvs.len() == n {
+            if !surf.uvs.is_empty() && surf.uvs.len() <= n {
+                // Particles the surface does not show (a mouse grab's handle) have none.
+                surf.uvs.resize(n, [0.0; 2]);
                 for &(parent, _) in &torn.copies {
                     let uv = surf.uvs[parent as usize];
                     surf.uvs.push(uv);
