@@ -442,7 +442,7 @@ pub fn tear_scene(
     let mut k = 0;
     scene.springs.retain(|_| {
         k += 1;
-        k - 1 >= n_springs || torn.broken.binary_search(&(k - 1)).is_err()
+        k > n_springs || torn.broken.binary_search(&(k - 1)).is_err()
     });
     if let Some(s) = &mut scene.surface {
         s.triangles = mesh.triangles;

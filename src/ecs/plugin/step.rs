@@ -382,7 +382,7 @@ pub(super) fn tear(
             if let Some(&se) = bs.packed_springs.get(k)
                 && let Ok(s) = springs.get(se)
             {
-                let mut copy = s.clone();
+                let mut copy = *s;
                 copy.a = entity[a as usize];
                 copy.b = entity[b as usize];
                 commands.spawn((copy, SpringOf(body_e)));
