@@ -140,35 +140,6 @@ fn bench(quick: bool) {
     bench_bodies(frames as u32);
 }
 
-/// Cloth `k` of a pile of `n × n` cloths as a scene of its own (its particles, springs and
-/// triangles, renumbered).
-fn cloth_of(pile: &Scene, n: usize, k: usize) -> Scene {
-    let (lo, hi) = (k * n * n, (k + 1) * n * n);
-    let mut s = pile.clone();
-    s.particles = pile.particles[lo..hi].to_vec();
-    s.springs = pile
-        .springs
-        .iter()
-        .filter(|sp| (lo..hi).contains(&sp.a) && (lo..hi).contains(&sp.b))
-        .map(|sp| {
-            let mut sp = sp.clone();
-            sp.a -= lo;
-            sp.b -= lo;
-            sp
-        })
-        .collect();
-    let surf = s.surface.as_mut().expect("the pile has a surface");
-    surf.triangles
-        .retain(|t| t.iter().all(|&i| (lo..hi).contains(&(i as usize))));
-    for t in &mut surf.triangles {
-        *t = t.map(|i| i - lo as u32);
-    }
-    if !surf.uvs.is_empty() {
-        surf.uvs = surf.uvs[lo..hi].to_vec();
-    }
-    s
-}
-
 /// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with one
 /// contact pass per frame between them (`core::body_contact`, what the plugin runs after its
 /// step), against the same pile as one body.
@@ -187,7 +158,10 @@ fn bench_bodies(frames: u32) {
     let n = p.resolution;
     let mut sims: Vec<_> = (0..p.cloths)
         .map(|k| {
-            let (model, state) = cloth_of(&pile, n, k).build().expect("valid scene");
+            let (model, state) = pile
+                .part(k * n * n..(k + 1) * n * n)
+                .build()
+                .expect("valid scene");
             Simulation::new(model, state, config)
         })
         .collect();

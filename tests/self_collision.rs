@@ -646,29 +646,7 @@ mod plugin {
     /// Cloth `k` of a pile of `n × n` cloths as a scene of its own (its particles, springs
     /// and triangles, renumbered; the colliders only with the first, so they are spawned once).
     fn cloth_of(pile: &Scene, n: usize, k: usize) -> Scene {
-        let (lo, hi) = (k * n * n, (k + 1) * n * n);
-        let mut s = pile.clone();
-        s.particles = pile.particles[lo..hi].to_vec();
-        s.springs = pile
-            .springs
-            .iter()
-            .filter(|sp| (lo..hi).contains(&sp.a) && (lo..hi).contains(&sp.b))
-            .map(|sp| {
-                let mut sp = sp.clone();
-                sp.a -= lo;
-                sp.b -= lo;
-                sp
-            })
-            .collect();
-        let surf = s.surface.as_mut().unwrap();
-        surf.triangles
-            .retain(|t| t.iter().all(|&i| (lo..hi).contains(&(i as usize))));
-        for t in &mut surf.triangles {
-            *t = t.map(|i| i - lo as u32);
-        }
-        if !surf.uvs.is_empty() {
-            surf.uvs = surf.uvs[lo..hi].to_vec();
-        }
+        let mut s = pile.part(k * n * n..(k + 1) * n * n);
         if k > 0 {
             s.colliders.clear();
         }

@@ -468,6 +468,51 @@ impl Scene {
         self
     }
 
+    /// The part of this scene made of the particles in `range` (what [`Scene::append`] put
+    /// together, taken apart): those particles, and the springs, tets, motions, forces and
+    /// surface triangles among them alone, renumbered from zero; everything else (gravity,
+    /// colliders, settings) as in this scene.
+    pub fn part(&self, range: std::ops::Range<usize>) -> Scene {
+        let lo = range.start;
+        let inside = |i: usize| range.contains(&i);
+        let mut s = self.clone();
+        s.particles = self.particles[range.clone()].to_vec();
+        s.springs = self
+            .springs
+            .iter()
+            .filter(|sp| inside(sp.a) && inside(sp.b))
+            .map(|sp| SpringDesc {
+                a: sp.a - lo,
+                b: sp.b - lo,
+                ..sp.clone()
+            })
+            .collect();
+        s.tets = self
+            .tets
+            .iter()
+            .filter(|t| t.vertices.iter().all(|&v| inside(v)))
+            .map(|t| TetDesc {
+                vertices: t.vertices.map(|v| v - lo),
+                ..t.clone()
+            })
+            .collect();
+        s.motions.retain(|m| inside(m.particle));
+        s.motions.iter_mut().for_each(|m| m.particle -= lo);
+        s.forces.retain(|f| inside(f.particle));
+        s.forces.iter_mut().for_each(|f| f.particle -= lo);
+        if let Some(surf) = &mut s.surface {
+            surf.triangles
+                .retain(|t| t.iter().all(|&i| inside(i as usize)));
+            for t in &mut surf.triangles {
+                *t = t.map(|i| i - lo as u32);
+            }
+            if !surf.uvs.is_empty() {
+                surf.uvs = surf.uvs[range].to_vec();
+            }
+        }
+        s
+    }
+
     /// Validates and builds the model and its initial state, through the same
     /// [`BodyLayout::build`] the plugin uses; then adds the scene's colliders.
     pub fn build(&self) -> Result<(ParticleModel, ParticleState), SceneError> {

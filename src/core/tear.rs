@@ -112,6 +112,19 @@ impl Torn {
     }
 }
 
+/// For each of `n` particles, the indices of the items (triangles, springs) that hold it.
+fn incidence<const N: usize>(items: &[[u32; N]], n: usize) -> Vec<Vec<usize>> {
+    let mut of: Vec<Vec<usize>> = vec![vec![]; n];
+    for (k, item) in items.iter().enumerate() {
+        for &c in item {
+            if let Some(l) = of.get_mut(c as usize) {
+                l.push(k);
+            }
+        }
+    }
+    of
+}
+
 fn area(x: &[Vector], t: &[u32; 3]) -> f64 {
     let [a, b, c] = t.map(|i| x[i as usize]);
     0.5 * (b - a).cross(c - a).length() as f64
@@ -153,22 +166,9 @@ impl TearMesh {
     pub fn tear(&mut self, broken: &[usize], x: &[Vector], mass: &mut Vec<f64>) -> Torn {
         let mut torn = Torn::default();
         let mut x = x.to_vec();
-        let mut vt: Vec<Vec<usize>> = vec![vec![]; x.len()];
-        for (t, tri) in self.triangles.iter().enumerate() {
-            for &c in tri {
-                if let Some(l) = vt.get_mut(c as usize) {
-                    l.push(t);
-                }
-            }
-        }
-        let mut at: Vec<Vec<usize>> = vec![vec![]; x.len()];
-        for (k, s) in self.springs.iter().enumerate() {
-            for &c in s {
-                if let Some(l) = at.get_mut(c as usize) {
-                    l.push(k);
-                }
-            }
-        }
+        // Triangles and springs at each particle.
+        let mut vt = incidence(&self.triangles, x.len());
+        let mut at = incidence(&self.springs, x.len());
         let n0 = self.springs.len();
         self.source = (0..n0).collect();
         let mut removed = vec![false; self.springs.len()];
