@@ -6,6 +6,7 @@
 //! cargo run --release --example cloth_pile
 //! cargo run --release --example cloth_pile -- --bench     # headless: cost of a step, table
 //! cargo run --release --example cloth_pile -- --bodies    # the pile as three bodies only
+//! cargo run --release --example cloth_pile -- --bench --only 64   # the 64² rows only (or 32)
 //! ```
 //!
 //! The three cloths are one body (`Scene::append`), so their surfaces collide with each other
@@ -36,7 +37,12 @@ fn main() {
         return;
     }
     if argv.iter().any(|a| a == "--bench") {
-        bench(argv.iter().any(|a| a == "--quick"));
+        let only = argv
+            .iter()
+            .position(|a| a == "--only")
+            .and_then(|k| argv.get(k + 1))
+            .and_then(|n| n.parse().ok());
+        bench(argv.iter().any(|a| a == "--quick"), only);
         return;
     }
     let args = common::args("cloth_pile");
@@ -76,7 +82,8 @@ fn surface(scene: &Scene) -> SoftBodySurface {
 
 /// Runs the pile headless and prints the cost of a step with and without self-collision,
 /// with the broad/narrow split.
-fn bench(quick: bool) {
+/// The table; `only`: just the rows of that resolution (64 or 32).
+fn bench(quick: bool, only: Option<usize>) {
     let frames = if quick { 60 } else { 180 };
     println!(
         "cloth pile, symplectic Euler at `ClothPileParams::stable_step` (1/1200 s for 32², 1/3500 s for 64²), {frames} frames ({:.1} s), {}, one thread",
@@ -84,10 +91,13 @@ fn bench(quick: bool) {
         PRECISION
     );
     println!(
-        "| scene | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | candidates (end) | near pairs per pass | CCD collisions | zones |"
+        "| scene | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones |"
     );
-    println!("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
+    println!("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
     for (cloths, n) in [(1, 64), (3, 32)] {
+        if only.is_some_and(|o| o != n) {
+            continue;
+        }
         let frames = if n == 64 { frames / 6 } else { frames };
         for on in [false, true] {
             let mut p = ClothPileParams {
@@ -123,13 +133,14 @@ fn bench(quick: bool) {
             let per = |d: Duration| d.as_secs_f64() * 1e6 / steps as f64;
             let pf = |k: u32| k as f64 / frames as f64;
             println!(
-                "| {cloths} × {n}² | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {} | {:.0} | {} | {} |",
+                "| {cloths} × {n}² | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} |",
                 if on { "on" } else { "off" },
                 per(wall),
                 per(r.broad),
                 per(r.narrow),
                 pf(r.passes_run),
                 pf(r.searches),
+                r.tested as f64 / r.searches.max(1) as f64,
                 r.candidates,
                 r.proximity as f64 / r.passes_run.max(1) as f64,
                 r.collisions,
@@ -137,7 +148,9 @@ fn bench(quick: bool) {
             );
         }
     }
-    bench_bodies(frames as u32);
+    if only.is_none() {
+        bench_bodies(frames as u32);
+    }
 }
 
 /// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with one

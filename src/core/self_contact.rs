@@ -33,15 +33,18 @@
 //! the last one, and at the end of every frame (the collision step spans the internal
 //! dynamics' steps, as in Bridson et al.), so each pass sees short motions and every frame
 //! ends free of intersections. The geometry is computed in `f64` whatever [`Scalar`] is. The
-//! broad phase is a spatial hash of swept boxes (Teschner et al., *Optimized spatial hashing
-//! for collision detection of deformable objects*, 2003) whose candidate pairs are kept
-//! across passes while every vertex stays within its box's margin relative to the surface's
-//! mean motion (a Verlet list).
+//! broad phase is a bounding-volume hierarchy of swept boxes with normal-cone culling of flat
+//! patches ([`tree`]); its candidate pairs are kept across passes while every vertex stays
+//! within its box's margin relative to the surface's mean motion (a Verlet list) and the
+//! patches it culled stay flat.
+
+mod tree;
 
 use crate::math::{Scalar, ToScalar, Vector};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
+use tree::SurfaceTree;
 
 /// Settings of a surface's contact with itself and with other such surfaces.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -166,6 +169,11 @@ pub struct SelfContactReport {
     /// Broad-phase searches run (the candidates are kept while every vertex stays within a
     /// thickness of where it was at the last search).
     pub searches: u32,
+    /// Pairs of triangles the searches compared (their leaves' boxes overlapping; the pairs
+    /// inside flat patches are never compared).
+    pub tested: u64,
+    /// Times a culled patch stopped being flat between searches and was walked on its own.
+    pub resumed: u32,
     /// Pairs closer than the thickness at the start of the step (impulses).
     pub proximity: u32,
     /// Pairs pushed apart at the end of the step.
@@ -201,6 +209,8 @@ impl SelfContactReport {
     pub fn add(&mut self, o: &SelfContactReport) {
         self.candidates += o.candidates;
         self.searches += o.searches;
+        self.tested += o.tested;
+        self.resumed += o.resumed;
         self.proximity += o.proximity;
         self.separated += o.separated;
         self.collisions += o.collisions;
@@ -279,12 +289,26 @@ struct Scratch {
     vel: Vec<DVec3>,
     w: Vec<f64>,
     zone: Vec<u32>,
-    hash: SpatialHash,
-    boxes: Vec<(DVec3, DVec3)>,
+    tree: SurfaceTree,
     /// Candidate pairs with their distance at the start of the step.
     pairs: Vec<(Pair, f64)>,
     vbox: Vec<(DVec3, DVec3)>,
-    stamp: Vec<u32>,
+    /// Ends of the surface vertices' paths over the pass (`p0 + u τ`), as of the last
+    /// broad-phase check.
+    p1: Vec<DVec3>,
+    /// Changes made to `u` (counted), and the count when the culled patches were last known
+    /// to be flat along the paths it gives (`u64::MAX`: not since the pass began).
+    edits: u64,
+    cones_at: u64,
+    /// The count of changes when the candidates were last known to cover the paths
+    /// (`u64::MAX`: not since the pass began).
+    broad_at: u64,
+    /// Vertices whose `u` changed since the cone bits were last computed (`moved_all`: any).
+    moved: Vec<u32>,
+    moved_mark: Vec<bool>,
+    moved_all: bool,
+    /// Searches resumed where culled patches stopped being flat.
+    resumed: u32,
     hits: Vec<[u32; 4]>,
     zone_sum: Vec<ZoneSum>,
     /// The average velocities the candidate pairs were found with (`None`: none found yet
@@ -294,6 +318,31 @@ struct Scratch {
     broad_ref: DVec3,
     broad_valid: bool,
     searches: u32,
+    tested: u64,
+}
+
+impl Scratch {
+    /// Notes a change to the average velocities of `ids`.
+    fn touch(&mut self, ids: &[u32; 4]) {
+        self.edits += 1;
+        if self.moved_all {
+            return;
+        }
+        for &i in ids {
+            if !self.moved_mark[i as usize] {
+                self.moved_mark[i as usize] = true;
+                self.moved.push(i);
+            }
+        }
+    }
+
+    fn clear_moved(&mut self) {
+        for &i in &self.moved {
+            self.moved_mark[i as usize] = false;
+        }
+        self.moved.clear();
+        self.moved_all = false;
+    }
 }
 
 /// A point–triangle (`[p, a, b, c]`) or edge–edge (`[a, b, c, d]`) pair.
@@ -407,6 +456,11 @@ impl SelfContact {
         s.u.resize(n, DVec3::ZERO);
         s.vel.resize(n, DVec3::ZERO);
         s.w.resize(n, 0.0);
+        // New paths: the culled patches' flatness is unknown.
+        s.cones_at = u64::MAX;
+        s.broad_at = u64::MAX;
+        s.moved_all = true;
+        s.moved_mark.resize(n, false);
         for &i in &self.surface.vertices {
             let i = i as usize;
             let p0 = to_d(x0[i]);
@@ -429,7 +483,7 @@ impl SelfContact {
 
         // 1–2: proximity at the start (impulses) and at the end (position pushes).
         let t0 = Instant::now();
-        let searches = s.searches;
+        let (searches, tested, resumed) = (s.searches, s.tested, s.resumed);
         let rebuilt = ctx.ensure_broad(s);
         let t1 = Instant::now();
         rep.broad += t1 - t0;
@@ -504,6 +558,8 @@ impl SelfContact {
             v[i] = from_d(s.vel[i]);
         }
         rep.searches = s.searches - searches;
+        rep.tested = s.tested - tested;
+        rep.resumed = s.resumed - resumed;
         self.last = rep;
         self.total.add(&rep);
         self.total.candidates = rep.candidates;
@@ -547,11 +603,23 @@ impl Ctx<'_> {
     /// then, grown by the thickness): kept across passes and steps (a Verlet list), so a body
     /// at rest or moving slowly searches rarely.
     fn ensure_broad(&self, s: &mut Scratch) -> bool {
+        // Nothing changed since the last check.
+        if s.broad_valid && s.broad_at == s.edits {
+            return false;
+        }
         let h = self.h;
         let verts = &self.surf.vertices;
         let nv = verts.len().max(1) as f64;
-        let mean0 = verts.iter().map(|&i| s.p0[i as usize]).sum::<DVec3>() / nv;
-        let mean1 = mean0 + verts.iter().map(|&i| s.u[i as usize]).sum::<DVec3>() * h / nv;
+        s.p1.resize(s.p0.len(), DVec3::ZERO);
+        let (mut sum0, mut sum1) = (DVec3::ZERO, DVec3::ZERO);
+        for &i in verts {
+            let i = i as usize;
+            let p1 = s.p0[i] + s.u[i] * h;
+            s.p1[i] = p1;
+            sum0 += s.p0[i];
+            sum1 += p1;
+        }
+        let (mean0, mean1) = (sum0 / nv, sum1 / nv);
         if s.broad_valid && s.vcore.len() == s.p0.len() {
             // The boxes are kept relative to the surface's mean position: a common translation
             // changes no distance.
@@ -559,10 +627,44 @@ impl Ctx<'_> {
             let inside = verts.iter().all(|&i| {
                 let i = i as usize;
                 let (lo, hi) = s.vcore[i];
-                let (a, b) = (s.p0[i] - d0, s.p0[i] + s.u[i] * h - d1);
+                let (a, b) = (s.p0[i] - d0, s.p1[i] - d1);
                 lo.cmple(a.min(b)).all() && a.max(b).cmple(hi).all()
             });
-            if inside {
+            // The culled patches must still be flat along the paths as they are now.
+            if inside && s.cones_at != s.edits {
+                let moved = (!s.moved_all).then_some(&s.moved[..]);
+                if s.moved_all {
+                    s.tree.load(verts, &s.p0, &s.p1);
+                } else {
+                    s.tree.load_some(&s.moved, &s.p1);
+                }
+                if !s.tree.still_flat(&self.surf.triangles, moved) {
+                    // Walk what is no longer flat (the boxes still hold): its pairs join the
+                    // candidates.
+                    let from = s.pairs.len();
+                    let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
+                    s.tree.search(
+                        &self.surf.triangles,
+                        &self.surf.edges,
+                        &s.vbox,
+                        true,
+                        |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
+                        |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
+                    );
+                    s.pairs = pairs.into_inner();
+                    s.tested += s.tree.triangle_pairs;
+                    s.resumed += 1;
+                    for k in from..s.pairs.len() {
+                        let pair = s.pairs[k].0;
+                        let y = Self::positions(self.stencil_ids(pair), |i| s.p0[i]);
+                        s.pairs[k].1 = Self::closest(pair, y).1;
+                    }
+                }
+                s.cones_at = s.edits;
+                s.clear_moved();
+            }
+            if inside && s.cones_at == s.edits {
+                s.broad_at = s.edits;
                 return false;
             }
         }
@@ -580,85 +682,49 @@ impl Ctx<'_> {
         });
         s.pairs = pairs;
         s.broad_valid = true;
+        s.broad_at = s.edits;
         s.searches += 1;
         true
     }
 
     /// Candidate pairs: swept boxes (start to end, grown by the thickness and `grow`) that
-    /// overlap; adjacent pairs (sharing a particle) excluded.
+    /// overlap; adjacent pairs (sharing a particle) excluded, and pairs within flat connected
+    /// patches culled (see [`tree`]).
     fn broad_phase(&self, s: &mut Scratch, grow: f64) {
         // Each vertex's path grown by `grow` (where it may go before the next search), and
         // that grown by half the thickness: two sets within the thickness of each other while
         // they stay in their first boxes have overlapping second boxes.
         let reach = PROXIMITY * self.thick;
-        let m = 0.5 * reach + grow;
         let (gd, td) = (DVec3::splat(grow), DVec3::splat(0.5 * reach));
         s.vbox.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
         s.vcore.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
         for &i in &self.surf.vertices {
             let i = i as usize;
-            let (a, b) = (s.p0[i], s.p0[i] + s.u[i] * self.h);
+            let (a, b) = (s.p0[i], s.p1[i]);
             let core = (a.min(b) - gd, a.max(b) + gd);
             s.vcore[i] = core;
             s.vbox[i] = (core.0 - td, core.1 + td);
         }
-        let union = |s: &Scratch, idx: &[u32]| {
-            let mut b = s.vbox[idx[0] as usize];
-            for &i in &idx[1..] {
-                let o = s.vbox[i as usize];
-                b = (b.0.min(o.0), b.1.max(o.1));
-            }
-            b
-        };
+        let (tris, edges) = (&self.surf.triangles, &self.surf.edges);
+        if !s.tree.built_for(tris.len()) {
+            s.tree.build(tris, edges, &s.p0);
+        }
+        s.tree.load(&self.surf.vertices, &s.p0, &s.p1);
+        s.tree.refit(tris, 0.5 * reach + grow);
         s.pairs.clear();
-        // Cell size: the mean edge length at the start (the scale of the surface's features)
-        // plus the growth.
-        let ne = self.surf.edges.len().max(1) as f64;
-        let mean_edge = self
-            .surf
-            .edges
-            .iter()
-            .map(|e| s.p0[e[0] as usize].distance(s.p0[e[1] as usize]))
-            .sum::<f64>()
-            / ne;
-        let cell = (mean_edge + 2.0 * m).max(1e-6);
-
-        // Points against triangles.
-        let mut boxes = std::mem::take(&mut s.boxes);
-        boxes.clear();
-        boxes.extend(self.surf.triangles.iter().map(|t| union(s, t)));
-        s.hash.build(&boxes, cell);
-        s.stamp.clear();
-        s.stamp
-            .resize(boxes.len().max(self.surf.edges.len()), u32::MAX);
-        let tris = &self.surf.triangles;
-        for (q, &p) in self.surf.vertices.iter().enumerate() {
-            let b = s.vbox[p as usize];
-            let pairs = &mut s.pairs;
-            s.hash.query(b, &boxes, &mut s.stamp, q as u32, 0, |t| {
-                if !tris[t as usize].contains(&p) {
-                    pairs.push((Pair::PointTriangle(p, t), 0.0));
-                }
-            });
-        }
-        // Edges against edges.
-        boxes.clear();
-        boxes.extend(self.surf.edges.iter().map(|e| union(s, e)));
-        s.hash.build(&boxes, cell);
-        s.stamp.iter_mut().for_each(|x| *x = u32::MAX);
-        let edges = &self.surf.edges;
-        for (q, e) in edges.iter().enumerate() {
-            let b = boxes[q];
-            let pairs = &mut s.pairs;
-            s.hash
-                .query(b, &boxes, &mut s.stamp, q as u32, q as u32 + 1, |f| {
-                    let g = edges[f as usize];
-                    if !g.contains(&e[0]) && !g.contains(&e[1]) {
-                        pairs.push((Pair::EdgeEdge(q as u32, f), 0.0));
-                    }
-                });
-        }
-        s.boxes = boxes;
+        let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
+        s.tree.search(
+            tris,
+            edges,
+            &s.vbox,
+            false,
+            |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
+            |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
+        );
+        s.pairs = pairs.into_inner();
+        s.tested += s.tree.triangle_pairs;
+        s.cones_at = s.edits;
+        s.clear_moved();
     }
 
     /// Each candidate pair's distance at the start of the pass (fixed for the pass: the start
@@ -756,11 +822,11 @@ impl Ctx<'_> {
     /// An inelastic impulse in `field` that stops the pair's approach along `nrm`, with
     /// Coulomb friction limited by it (`|Δv_t| ≤ μ Δv_n`); nothing when it is not
     /// approaching. It never adds kinetic energy.
-    fn stop_approach(w: &[f64], field: &mut [DVec3], st: &Stencil, nrm: DVec3, mu: f64) {
+    fn stop_approach(w: &[f64], field: &mut [DVec3], st: &Stencil, nrm: DVec3, mu: f64) -> bool {
         let vr = Self::relative(st, field);
         let vn = vr.dot(nrm);
         if vn >= 0.0 {
-            return;
+            return false;
         }
         let dvn = -vn;
         let vt = vr - nrm * vn;
@@ -771,14 +837,17 @@ impl Ctx<'_> {
             DVec3::ZERO
         };
         Self::apply(w, field, st, nrm * dvn + dvt);
+        true
     }
 
     /// The pair stops approaching, in the average velocities (the motion over the step) and
     /// in the end velocities, each by its own inelastic impulse: a pair whose end velocities
     /// already separate is left as it is.
     fn inelastic(&self, s: &mut Scratch, st: &Stencil, nrm: DVec3) {
-        Self::stop_approach(&s.w, &mut s.u, st, nrm, self.mu);
-        Self::stop_approach(&s.w, &mut s.vel, st, nrm, self.mu);
+        if Self::stop_approach(&s.w, &mut s.u, st, nrm, self.mu) {
+            s.touch(&st.idx);
+        }
+        let _ = Self::stop_approach(&s.w, &mut s.vel, st, nrm, self.mu);
     }
 
     fn positions(ids: [u32; 4], f: impl Fn(usize) -> DVec3) -> [DVec3; 4] {
@@ -833,6 +902,7 @@ impl Ctx<'_> {
         }
         let st = Stencil { idx: ids, wt };
         Self::apply(&s.w, &mut s.u, &st, nrm * ((self.thick - d) / self.h));
+        s.touch(&st.idx);
         true
     }
 
@@ -899,6 +969,7 @@ impl Ctx<'_> {
         let remaining = ((1.0 - tau) * self.h).max(1e-3 * self.h);
         let sep = 0.1 * self.thick;
         Self::apply(&s.w, &mut s.u, st, nrm * (sep / remaining));
+        s.touch(&st.idx);
     }
 
     /// All pairs colliding over the step (with the current motion), as their particles.
@@ -975,6 +1046,8 @@ impl Ctx<'_> {
             };
             s.u[i] = (new_end - s.p0[i]) / self.h;
         }
+        s.edits += 1;
+        s.moved_all = true;
         self.fit_zones(s, true);
         for &i in &self.surf.vertices {
             let r = find(&mut s.zone, i) as usize;
@@ -1275,140 +1348,6 @@ pub fn closest_between_segments(p1: DVec3, q1: DVec3, p2: DVec3, q2: DVec3) -> (
         }
     }
     (s, t)
-}
-
-/// A spatial hash of boxes, built by counting sort into reused buffers.
-#[derive(Clone, Debug, Default)]
-struct SpatialHash {
-    cell: f64,
-    start: Vec<u32>,
-    items: Vec<u32>,
-    /// Boxes spanning too many cells: tested against every query.
-    big: Vec<u32>,
-}
-
-/// A box spanning more cells than this goes to the hash's list of big boxes.
-const MAX_CELLS: i64 = 64;
-
-impl SpatialHash {
-    fn cells(&self, b: (DVec3, DVec3)) -> Option<([i64; 3], [i64; 3])> {
-        let lo = (b.0 / self.cell).floor();
-        let hi = (b.1 / self.cell).floor();
-        let span = hi - lo + DVec3::ONE;
-        // Counted in f64 first: a huge box must not overflow the integer product.
-        if !(lo.is_finite() && hi.is_finite()) || span.x * span.y * span.z > MAX_CELLS as f64 {
-            return None;
-        }
-        Some((
-            [lo.x as i64, lo.y as i64, lo.z as i64],
-            [hi.x as i64, hi.y as i64, hi.z as i64],
-        ))
-    }
-
-    fn slot(&self, c: [i64; 3]) -> usize {
-        // Teschner et al.'s primes, then a 64-bit finalizer (splitmix64's) so the low bits
-        // the mask keeps depend on every coordinate's bits.
-        let mut h = ((c[0].wrapping_mul(73_856_093))
-            ^ (c[1].wrapping_mul(19_349_663))
-            ^ (c[2].wrapping_mul(83_492_791))) as u64;
-        h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        h ^= h >> 31;
-        // `start` has a power of two of slots plus an end marker.
-        (h & (self.start.len() as u64 - 2)) as usize
-    }
-
-    fn each_cell(r: ([i64; 3], [i64; 3]), mut f: impl FnMut([i64; 3])) {
-        for x in r.0[0]..=r.1[0] {
-            for y in r.0[1]..=r.1[1] {
-                for z in r.0[2]..=r.1[2] {
-                    f([x, y, z]);
-                }
-            }
-        }
-    }
-
-    fn build(&mut self, boxes: &[(DVec3, DVec3)], cell: f64) {
-        self.cell = cell;
-        let slots = (2 * boxes.len()).next_power_of_two().max(16) + 1;
-        self.start.clear();
-        self.start.resize(slots, 0);
-        self.big.clear();
-        let mut total = 0usize;
-        for (k, b) in boxes.iter().enumerate() {
-            match self.cells(*b) {
-                Some(r) => Self::each_cell(r, |c| {
-                    let s = self.slot(c);
-                    self.start[s] += 1;
-                    total += 1;
-                }),
-                None => self.big.push(k as u32),
-            }
-        }
-        // Prefix sums: `start[s]` is the end of slot `s`'s run; filling walks it back.
-        let mut acc = 0;
-        for s in self.start.iter_mut() {
-            acc += *s;
-            *s = acc;
-        }
-        self.items.clear();
-        self.items.resize(total, 0);
-        for (k, b) in boxes.iter().enumerate() {
-            if let Some(r) = self.cells(*b) {
-                Self::each_cell(r, |c| {
-                    let s = self.slot(c);
-                    self.start[s] -= 1;
-                    self.items[self.start[s] as usize] = k as u32;
-                });
-            }
-        }
-        // Now `start[s]` is the beginning of slot `s`'s run; the last slot marks the end.
-        let last = self.start.len() - 1;
-        self.start[last] = total as u32;
-    }
-
-    /// Calls `f` once with every stored box overlapping `b` (`stamp` marks boxes already seen
-    /// by query `q`).
-    /// Only boxes with an index of at least `from` are visited (a query of a set against
-    /// itself takes each pair once).
-    #[allow(clippy::too_many_arguments)]
-    fn query(
-        &self,
-        b: (DVec3, DVec3),
-        boxes: &[(DVec3, DVec3)],
-        stamp: &mut [u32],
-        q: u32,
-        from: u32,
-        mut f: impl FnMut(u32),
-    ) {
-        let mut visit = |k: u32, stamp: &mut [u32]| {
-            if k < from || stamp[k as usize] == q {
-                return;
-            }
-            stamp[k as usize] = q;
-            let o = boxes[k as usize];
-            if o.0.cmple(b.1).all() && b.0.cmple(o.1).all() {
-                f(k);
-            }
-        };
-        for &k in &self.big {
-            visit(k, stamp);
-        }
-        match self.cells(b) {
-            Some(r) => Self::each_cell(r, |c| {
-                let s = self.slot(c);
-                let (lo, hi) = (self.start[s] as usize, self.start[s + 1] as usize);
-                for &k in &self.items[lo..hi] {
-                    visit(k, stamp);
-                }
-            }),
-            None => {
-                for k in from..boxes.len() as u32 {
-                    visit(k, stamp);
-                }
-            }
-        }
-    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,1176 @@
+//! The broad phase of contact: a bounding-volume hierarchy over the surface's triangles,
+//! refitted to every pass's swept boxes, with normal-cone culling of flat patches.
+//!
+//! The tree is built once per surface, top-down by median splits of the triangles' centroids
+//! at the first pass (after splitting apart its connected pieces, so that two bodies or two
+//! cloths of one body never share a node below the nodes that separate them); after that only
+//! its boxes and cones are refitted (van den Bergen, *Efficient collision detection of complex
+//! deformable models using AABB trees*, 1997), so its nodes stay compact pieces of the
+//! surface as it deforms.
+//!
+//! **Normal cones.** A connected patch of surface whose normals all lie in one open hemisphere
+//! cannot touch itself (Volino and Magnenat-Thalmann, *Efficient self-collision detection on
+//! smoothly discretized surface animations using geometrical shape regularity*, 1994;
+//! Provot, *Collision and self-collision handling in cloth model dedicated to design
+//! garments*, 1997), so the self-test of such a node stops there: a smooth sheet, falling or
+//! draped, costs one test at the root, and a folded one costs its folds. The hemisphere must
+//! hold for the whole motion of the pass: along straight paths a triangle's normal is
+//! `n(τ) = (1−τ)² B₀ + 2τ(1−τ) B₁ + τ² B₂` with `B₀`, `B₂` the normals at the start and end
+//! and `B₁ = ½ (e₀ × f₁ + e₁ × f₀)` (its edges `e`, `f` at the start and end), a combination
+//! with non-negative weights, so a direction `d` with `Bₖ · d > 0` for the three control
+//! vectors has `n(τ) · d > 0` all along (the Bernstein bound of Tang, Curtis, Yoon and
+//! Manocha, *Interactive continuous collision detection between deformable models using
+//! connectivity-based culling*, 2009). Rather than fitting a cone (which takes inverse
+//! cosines), each triangle records, as bits, which of 26 fixed directions (the faces, edges
+//! and corners of a cube) every control vector is strictly on the positive side of; a node's
+//! bits are the intersection of its triangles', and a non-empty set is a common hemisphere. It
+//! recognises every cone of half-angle up to 62° (no direction lies farther than 28° from the
+//! nearest of the 26) and some up to 90°: conservative.
+//!
+//! Volino and Magnenat-Thalmann's criterion also asks that the patch's contour, projected
+//! along that direction, not cross itself. That test is not made: a node is a compact piece of
+//! the surface as it was when the tree was built (a median split), and for its projected
+//! contour to cross itself while every normal stays in one hemisphere it would have to curl
+//! around in its own plane, which takes in-plane stretch or compression far beyond what cloth
+//! or a solid's skin undergoes. Patches that are not connected across edges (a median split
+//! can cut a U in two arms) are never culled.
+//!
+//! **Pairs.** Each vertex and each edge is owned by one triangle (the first that holds it);
+//! a pair of triangles with overlapping boxes yields the point–triangle pairs of the vertices
+//! each owns against the other and the edge–edge pairs of the edges they own, so every
+//! feature pair comes from exactly one triangle pair and is found once.
+
+use glam::{DVec3, Vec3A, Vec4};
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// A box (low and high corners).
+pub(super) type Aabb = (DVec3, DVec3);
+
+/// Most triangles in a leaf.
+const LEAF: usize = 4;
+
+/// How far (as a factor) a triangle's edges may stretch or shrink from their lengths when the
+/// tree was built and its patch still be culled as flat.
+pub const DISTORTION: f32 = 1.5;
+
+/// Bounds on a triangle's squared edge lengths (low, high).
+type Span = (Vec3A, Vec3A);
+
+/// Nothing (an unused slot of a triangle's owned features).
+const NONE: u32 = u32::MAX;
+
+/// The 13 directions whose two signs give the 26 of the cone test (as integer components:
+/// the dot product is a signed sum of the vector's components).
+#[cfg(test)]
+const DIRECTIONS: [[i8; 3]; 13] = [
+    [1, 0, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 1, 0],
+    [1, -1, 0],
+    [1, 0, 1],
+    [1, 0, -1],
+    [0, 1, 1],
+    [0, 1, -1],
+    [1, 1, 1],
+    [1, 1, -1],
+    [1, -1, 1],
+    [1, -1, -1],
+];
+
+/// The dot products of `b` with the 13 [`DIRECTIONS`], in order, in four lanes of four (the
+/// last three lanes repeat the thirteenth).
+#[inline]
+fn direction_dots(b: Vec3A) -> [Vec4; 4] {
+    let (x, y, z) = (b.x, b.y, b.z);
+    let xyz = x - y - z;
+    [
+        Vec4::new(x, y, z, x + y),
+        Vec4::new(x - y, x + z, x - z, y + z),
+        Vec4::new(y - z, x + y + z, x + y - z, x - y + z),
+        Vec4::splat(xyz),
+    ]
+}
+
+/// The directions all of whose hemispheres hold a triangle's normal along straight paths
+/// from `p0` to `p1` (`f32` positions whose components are at most `qmax`): those of the
+/// three Bernstein control vectors, as bits (bit `k`: `DIRECTIONS[k]`, bit `13 + k`: its
+/// opposite) set when every control vector is on the positive side by more than the
+/// round-off of computing it. The bound: the positions carry a relative error of 2⁻²⁴ (from
+/// `f64`), an edge `e` then one of 2⁻²⁴(2 `qmax` + |e|) per component, a component of a
+/// cross product `e × f` one of about 2⁻²³(2 `qmax` (|e| + |f|) + 4 |e| |f|) with its own
+/// rounding, and a dot product with a direction sums three; `tol` is four times that.
+///
+/// A triangle whose edges are not within `span` (squared lengths) at both ends has no bits:
+/// patches are culled only while no edge has stretched or shrunk past [`DISTORTION`].
+#[inline]
+pub(super) fn triangle_bits(p0: [Vec3A; 3], p1: [Vec3A; 3], qmax: f32, span: Span) -> u32 {
+    let (e0, f0) = (p0[1] - p0[0], p0[2] - p0[0]);
+    let (e1, f1) = (p1[1] - p1[0], p1[2] - p1[0]);
+    // Squared edge lengths at both ends of the path (the longest along it is at one end).
+    let len2 = |e: Vec3A, f: Vec3A| {
+        Vec3A::new(
+            e.length_squared(),
+            f.length_squared(),
+            (f - e).length_squared(),
+        )
+    };
+    let (l0, l1) = (len2(e0, f0), len2(e1, f1));
+    if !(l0.cmpge(span.0) & l0.cmple(span.1) & l1.cmpge(span.0) & l1.cmple(span.1)).all() {
+        return 0;
+    }
+    // e₀ × f₁ + e₁ × f₀ = e₀ × f₀ + e₁ × f₁ − (e₁ − e₀) × (f₁ − f₀).
+    let (n0, n1) = (e0.cross(f0), e1.cross(f1));
+    let b0 = direction_dots(n0);
+    let b1 = direction_dots(0.5 * (n0 + n1 - (e1 - e0).cross(f1 - f0)));
+    let b2 = direction_dots(n1);
+    let e = e0.abs().max(e1.abs()).max_element();
+    let f = f0.abs().max(f1.abs()).max_element();
+    let tol = Vec4::splat(12.0 * f32::EPSILON * (2.0 * qmax * (e + f) + 4.0 * e * f));
+    let mut bits = 0;
+    for k in 0..4 {
+        let lo = b0[k].min(b1[k]).min(b2[k]);
+        let hi = b0[k].max(b1[k]).max(b2[k]);
+        // The last group holds one direction (its lanes repeat it).
+        let keep = if k == 3 { 1 } else { 0xf };
+        bits |= (lo.cmpgt(tol).bitmask() & keep) << (4 * k);
+        bits |= (hi.cmplt(-tol).bitmask() & keep) << (13 + 4 * k);
+    }
+    bits
+}
+
+/// A box in `f32`.
+type Box32 = (Vec3A, Vec3A);
+
+fn overlap(a: &Aabb, b: &Aabb) -> bool {
+    a.0.cmple(b.1).all() && b.0.cmple(a.1).all()
+}
+
+fn overlap32(a: &Box32, b: &Box32) -> bool {
+    a.0.cmple(b.1).all() && b.0.cmple(a.1).all()
+}
+
+fn union(a: Aabb, b: Aabb) -> Aabb {
+    (a.0.min(b.0), a.1.max(b.1))
+}
+
+fn union32(a: Box32, b: Box32) -> Box32 {
+    (a.0.min(b.0), a.1.max(b.1))
+}
+
+/// A node: triangles `order[start..end]`; children at `child` and `child + 1` (0: a leaf).
+#[derive(Clone, Copy, Debug, Default)]
+struct Node {
+    start: u32,
+    end: u32,
+    child: u32,
+    /// The node's triangles form one piece across shared edges (only those are culled).
+    connected: bool,
+}
+
+/// The hierarchy and what its last search found.
+#[derive(Clone, Debug, Default)]
+pub(super) struct SurfaceTree {
+    nodes: Vec<Node>,
+    /// Triangles in leaf order.
+    order: Vec<u32>,
+    /// Per triangle: the vertices it owns (`NONE` pads).
+    owned_vertices: Vec<[u32; 3]>,
+    /// Per triangle: the edges (indices into the surface's edge list) it owns.
+    owned_edges: Vec<[u32; 3]>,
+    /// The triangle count it was built for.
+    built_for: usize,
+    /// Per triangle: the squared edge lengths it may have and still be culled.
+    span: Vec<Span>,
+    /// Per vertex (compressed rows): the triangles around it.
+    vertex_start: Vec<u32>,
+    vertex_tris: Vec<u32>,
+    /// Per triangle: swept box (relative to `origin`, in `f32`, rounded outwards) and cone
+    /// bits of the last refit.
+    tbox: Vec<Box32>,
+    tbits: Vec<u32>,
+    /// Per node: box and cone bits of the last refit.
+    nbox: Vec<Box32>,
+    nbits: Vec<u32>,
+    /// The surface's vertices at the start and end of the pass relative to `origin`, in `f32`
+    /// ([`SurfaceTree::load`]), and the largest component among them.
+    q0: Vec<Vec3A>,
+    q1: Vec<Vec3A>,
+    qmax: f32,
+    origin: DVec3,
+    /// Per node (compressed rows): the positions in `order` of the triangles outside it that
+    /// share an edge with one inside, ascending.
+    border_start: Vec<u32>,
+    border: Vec<u32>,
+    /// Node pairs (a node with itself, or two adjacent nodes) the last search skipped as flat:
+    /// their triangles' common bits must stay non-empty for its pairs to stay complete.
+    culled: Vec<(u32, u32)>,
+    /// Culled pairs found no longer flat, not yet walked.
+    failed: Vec<(u32, u32)>,
+    stack: Vec<(u32, u32, bool)>,
+    /// Counters of the last search: node pairs visited and triangle pairs tested.
+    pub visits: u64,
+    pub triangle_pairs: u64,
+}
+
+impl SurfaceTree {
+    /// Whether the tree was built for a surface of `triangles` triangles.
+    pub fn built_for(&self, triangles: usize) -> bool {
+        self.built_for == triangles && !self.nodes.is_empty()
+    }
+
+    /// Builds the hierarchy over `triangles` (with the surface's sorted unique `edges`) at
+    /// positions `x`.
+    pub fn build(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]], x: &[DVec3]) {
+        let nt = triangles.len();
+        self.built_for = nt;
+        self.nodes.clear();
+        self.order.clear();
+        self.culled.clear();
+        if nt == 0 {
+            return;
+        }
+        let edge_of = |a: u32, b: u32| -> u32 {
+            let key = [a.min(b), a.max(b)];
+            edges.binary_search(&key).map_or(NONE, |k| k as u32)
+        };
+        let tri_edges: Vec<[u32; 3]> = triangles
+            .iter()
+            .map(|t| {
+                [
+                    edge_of(t[0], t[1]),
+                    edge_of(t[1], t[2]),
+                    edge_of(t[2], t[0]),
+                ]
+            })
+            .collect();
+
+        let at = |i: u32| {
+            let p = x.get(i as usize).copied().unwrap_or(DVec3::ZERO);
+            if p.is_finite() { p } else { DVec3::ZERO }
+        };
+        let d2 = DISTORTION * DISTORTION;
+        self.span.clear();
+        self.span.extend(triangles.iter().map(|t| {
+            let [a, b, c] = t.map(at);
+            let l = Vec3A::new(
+                (b - a).length_squared() as f32,
+                (c - a).length_squared() as f32,
+                (c - b).length_squared() as f32,
+            );
+            (l / d2, l * d2)
+        }));
+
+        // Ownership: the first triangle holding a vertex or an edge owns it.
+        let nv = x.len();
+        let mut vertex_taken = vec![false; nv];
+        let mut edge_taken = vec![false; edges.len()];
+        self.owned_vertices.clear();
+        self.owned_edges.clear();
+        for (t, te) in triangles.iter().zip(&tri_edges) {
+            let mut ov = [NONE; 3];
+            let mut oe = [NONE; 3];
+            for k in 0..3 {
+                let v = t[k] as usize;
+                if v < nv && !vertex_taken[v] {
+                    vertex_taken[v] = true;
+                    ov[k] = t[k];
+                }
+                let e = te[k];
+                if e != NONE && !edge_taken[e as usize] {
+                    edge_taken[e as usize] = true;
+                    oe[k] = e;
+                }
+            }
+            self.owned_vertices.push(ov);
+            self.owned_edges.push(oe);
+        }
+
+        // Triangles around each vertex.
+        self.vertex_start.clear();
+        self.vertex_start.resize(nv + 1, 0);
+        for t in triangles {
+            for &v in t.iter().filter(|&&v| (v as usize) < nv) {
+                self.vertex_start[v as usize + 1] += 1;
+            }
+        }
+        for k in 0..nv {
+            self.vertex_start[k + 1] += self.vertex_start[k];
+        }
+        let mut fill = self.vertex_start.clone();
+        self.vertex_tris.clear();
+        self.vertex_tris.resize(self.vertex_start[nv] as usize, 0);
+        for (k, t) in triangles.iter().enumerate() {
+            for &v in t.iter().filter(|&&v| (v as usize) < nv) {
+                self.vertex_tris[fill[v as usize] as usize] = k as u32;
+                fill[v as usize] += 1;
+            }
+        }
+
+        // Triangles around each edge (compressed rows), for connectivity.
+        let mut edge_start = vec![0u32; edges.len() + 1];
+        for te in &tri_edges {
+            for &e in te.iter().filter(|&&e| e != NONE) {
+                edge_start[e as usize + 1] += 1;
+            }
+        }
+        for k in 0..edges.len() {
+            edge_start[k + 1] += edge_start[k];
+        }
+        let mut fill = edge_start.clone();
+        let mut edge_tris = vec![0u32; edge_start[edges.len()] as usize];
+        for (t, te) in tri_edges.iter().enumerate() {
+            for &e in te.iter().filter(|&&e| e != NONE) {
+                edge_tris[fill[e as usize] as usize] = t as u32;
+                fill[e as usize] += 1;
+            }
+        }
+
+        // Clusters merged along shared edges, the pair whose joint box has the shortest
+        // diagonal first (as in Garland, Willmott and Heckbert's *Hierarchical face
+        // clustering on polygonal surfaces*, 2001, with compactness for the cost): every
+        // cluster is one piece of surface, small and compact ones merge first.
+        let tri_box: Vec<Aabb> = triangles
+            .iter()
+            .map(|t| {
+                t.iter().fold((DVec3::MAX, DVec3::MIN), |(l, h), &i| {
+                    let p = x.get(i as usize).copied().unwrap_or(DVec3::ZERO);
+                    let p = if p.is_finite() { p } else { DVec3::ZERO };
+                    (l.min(p), h.max(p))
+                })
+            })
+            .collect();
+        let mut cl: Vec<Cluster> = tri_box
+            .iter()
+            .map(|&b| Cluster {
+                bx: b,
+                size: 1,
+                children: None,
+                alive: true,
+                neighbours: Vec::new(),
+            })
+            .collect();
+        for k in 0..edges.len() {
+            let ts = &edge_tris[edge_start[k] as usize..edge_start[k + 1] as usize];
+            for &a in ts {
+                for &b in ts {
+                    if a != b && !cl[a as usize].neighbours.contains(&b) {
+                        cl[a as usize].neighbours.push(b);
+                    }
+                }
+            }
+        }
+        let cost = |a: &Cluster, b: &Cluster| {
+            let u = union(a.bx, b.bx);
+            (u.1 - u.0).length_squared().to_bits()
+        };
+        let mut heap = BinaryHeap::new();
+        for a in 0..nt {
+            for &b in &cl[a].neighbours {
+                if (a as u32) < b {
+                    heap.push(Reverse((cost(&cl[a], &cl[b as usize]), a as u32, b)));
+                }
+            }
+        }
+        while let Some(Reverse((_, a, b))) = heap.pop() {
+            if !(cl[a as usize].alive && cl[b as usize].alive) {
+                continue;
+            }
+            let c = cl.len() as u32;
+            let mut neighbours: Vec<u32> = cl[a as usize]
+                .neighbours
+                .iter()
+                .chain(&cl[b as usize].neighbours)
+                .copied()
+                .filter(|&n| n != a && n != b)
+                .collect();
+            neighbours.sort_unstable();
+            neighbours.dedup();
+            for &n in &neighbours {
+                let ns = &mut cl[n as usize].neighbours;
+                ns.retain(|&m| m != a && m != b);
+                ns.push(c);
+            }
+            cl[a as usize].alive = false;
+            cl[b as usize].alive = false;
+            let merged = Cluster {
+                bx: union(cl[a as usize].bx, cl[b as usize].bx),
+                size: cl[a as usize].size + cl[b as usize].size,
+                children: Some((a, b)),
+                alive: true,
+                neighbours: Vec::new(),
+            };
+            for &n in &neighbours {
+                heap.push(Reverse((cost(&merged, &cl[n as usize]), c, n)));
+            }
+            cl[a as usize].neighbours = Vec::new();
+            cl[b as usize].neighbours = Vec::new();
+            cl.push(Cluster {
+                neighbours,
+                ..merged
+            });
+        }
+        // What is left are the surface's pieces: joined top-down by median splits of their
+        // boxes' centres.
+        let mut roots: Vec<u32> = (0..cl.len() as u32)
+            .filter(|&c| cl[c as usize].alive)
+            .collect();
+        let root = join(&mut cl, &mut roots);
+
+        // Laid out top-down: each node's triangles contiguous in `order`, children in pairs
+        // after their parent; clusters of at most `LEAF` triangles become leaves.
+        self.nodes.push(Node::default());
+        let mut todo = vec![(root, 0usize)];
+        let mut below = Vec::new();
+        while let Some((c, n)) = todo.pop() {
+            let start = self.order.len() as u32;
+            match cl[c as usize].children {
+                Some((a, b)) if cl[c as usize].size as usize > LEAF => {
+                    let child = self.nodes.len();
+                    self.nodes.push(Node::default());
+                    self.nodes.push(Node::default());
+                    self.nodes[n].child = child as u32;
+                    // The first child is laid out first: it is popped first.
+                    todo.push((b, child + 1));
+                    todo.push((a, child));
+                    self.nodes[n].start = start;
+                }
+                _ => {
+                    below.push(c);
+                    while let Some(d) = below.pop() {
+                        match cl[d as usize].children {
+                            Some((a, b)) => {
+                                below.push(b);
+                                below.push(a);
+                            }
+                            None => self.order.push(d),
+                        }
+                    }
+                    self.nodes[n].start = start;
+                    self.nodes[n].end = self.order.len() as u32;
+                }
+            }
+        }
+        // Inner nodes end where their second child ends.
+        for n in (0..self.nodes.len()).rev() {
+            let child = self.nodes[n].child as usize;
+            if child != 0 {
+                self.nodes[n].start = self.nodes[child].start;
+                self.nodes[n].end = self.nodes[child + 1].end;
+            }
+        }
+        let mut parent: Vec<u32> = (0..nt as u32).collect();
+        let mut stamp = vec![NONE; nt];
+        for n in 0..self.nodes.len() {
+            let node = self.nodes[n];
+            self.nodes[n].connected = connected(
+                &self.order[node.start as usize..node.end as usize],
+                &tri_edges,
+                &edge_start,
+                &edge_tris,
+                n as u32,
+                &mut stamp,
+                &mut parent,
+            );
+        }
+
+        // Each node's border, for telling whether two nodes meet along an edge.
+        let mut pos = vec![0u32; nt];
+        for (k, &t) in self.order.iter().enumerate() {
+            pos[t as usize] = k as u32;
+        }
+        self.border_start.clear();
+        self.border.clear();
+        self.border_start.push(0);
+        for node in &self.nodes {
+            let from = self.border.len();
+            for &t in &self.order[node.start as usize..node.end as usize] {
+                for &e in tri_edges[t as usize].iter().filter(|&&e| e != NONE) {
+                    let e = e as usize;
+                    for &u in &edge_tris[edge_start[e] as usize..edge_start[e + 1] as usize] {
+                        let p = pos[u as usize];
+                        if p < node.start || p >= node.end {
+                            self.border.push(p);
+                        }
+                    }
+                }
+            }
+            self.border[from..].sort_unstable();
+            let mut w = from;
+            for r in from..self.border.len() {
+                if w == from || self.border[r] != self.border[w - 1] {
+                    self.border[w] = self.border[r];
+                    w += 1;
+                }
+            }
+            self.border.truncate(w);
+            self.border_start.push(self.border.len() as u32);
+        }
+        self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
+        self.tbits.resize(nt, 0);
+        self.nbox
+            .resize(self.nodes.len(), (Vec3A::ZERO, Vec3A::ZERO));
+        self.nbits.resize(self.nodes.len(), 0);
+    }
+
+    /// Takes the surface's vertices `verts` at the start `p0` and end `p1` of the pass, for
+    /// [`SurfaceTree::refit`] and [`SurfaceTree::still_flat`]: in `f32` relative to their
+    /// mean (the cone test and the boxes allow for the rounding).
+    pub fn load(&mut self, verts: &[u32], p0: &[DVec3], p1: &[DVec3]) {
+        let n = verts.len().max(1) as f64;
+        let origin = verts.iter().map(|&i| p0[i as usize]).sum::<DVec3>() / n;
+        self.q0.resize(p0.len(), Vec3A::ZERO);
+        self.q1.resize(p0.len(), Vec3A::ZERO);
+        let mut qmax = Vec3A::ZERO;
+        for &i in verts {
+            let i = i as usize;
+            let (a, b) = ((p0[i] - origin).as_vec3a(), (p1[i] - origin).as_vec3a());
+            self.q0[i] = a;
+            self.q1[i] = b;
+            qmax = qmax.max(a.abs()).max(b.abs());
+        }
+        self.qmax = qmax.max_element();
+        self.origin = origin;
+    }
+
+    /// Takes new ends `p1` of the paths of `moved` vertices (the starts and the others as
+    /// last loaded).
+    pub fn load_some(&mut self, moved: &[u32], p1: &[DVec3]) {
+        let mut qmax = self.qmax;
+        for &i in moved {
+            let i = i as usize;
+            let b = (p1[i] - self.origin).as_vec3a();
+            self.q1[i] = b;
+            qmax = qmax.max(b.abs().max_element());
+        }
+        self.qmax = qmax;
+    }
+
+    /// Refits the boxes (the triangles' paths over the pass, as [`SurfaceTree::load`]ed,
+    /// grown by `margin`) and the cone bits.
+    pub fn refit(&mut self, triangles: &[[u32; 3]], margin: f64) {
+        // The margin plus the rounding of the positions to `f32` (half an ulp of the largest,
+        // twice over) and of the margin itself.
+        let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + self.qmax * f32::EPSILON);
+        let (q0, q1, qmax) = (&self.q0, &self.q1, self.qmax);
+        for (t, tri) in triangles.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| i as usize);
+            let (s, e) = ([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]]);
+            let lo = s[0].min(s[1]).min(s[2]).min(e[0].min(e[1]).min(e[2]));
+            let hi = s[0].max(s[1]).max(s[2]).max(e[0].max(e[1]).max(e[2]));
+            self.tbox[t] = (lo - m, hi + m);
+            self.tbits[t] = triangle_bits(s, e, qmax, self.span[t]);
+        }
+        self.refit_nodes(true);
+    }
+
+    /// Whether nodes `a` and `b` (disjoint) meet along an edge.
+    fn adjacent(&self, a: u32, b: u32) -> bool {
+        let border = &self.border
+            [self.border_start[a as usize] as usize..self.border_start[a as usize + 1] as usize];
+        let nb = self.nodes[b as usize];
+        let k = border.partition_point(|&p| p < nb.start);
+        k < border.len() && border[k] < nb.end
+    }
+
+    /// Whether every node pair the last search culled is still flat along the paths as
+    /// [`SurfaceTree::load`]ed: the cone bits of the triangles around the vertices `moved` (all, with
+    /// `None`) are recomputed, the others' are those of the same paths.
+    pub fn still_flat(&mut self, triangles: &[[u32; 3]], moved: Option<&[u32]>) -> bool {
+        if self.culled.is_empty() {
+            return true;
+        }
+        let (q0, q1, qmax, tbits) = (&self.q0, &self.q1, self.qmax, &mut self.tbits);
+        let span = &self.span;
+        let mut bits_of = |t: usize| {
+            let [a, b, c] = triangles[t].map(|i| i as usize);
+            tbits[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
+        };
+        match moved {
+            None => (0..triangles.len()).for_each(&mut bits_of),
+            Some(moved) => {
+                for &v in moved {
+                    let v = v as usize;
+                    if v + 1 < self.vertex_start.len() {
+                        let (lo, hi) = (self.vertex_start[v], self.vertex_start[v + 1]);
+                        for k in lo..hi {
+                            bits_of(self.vertex_tris[k as usize] as usize);
+                        }
+                    }
+                }
+            }
+        }
+        let node_bits = |n: u32| {
+            let node = self.nodes[n as usize];
+            self.order[node.start as usize..node.end as usize]
+                .iter()
+                .fold(u32::MAX, |b, &t| b & self.tbits[t as usize])
+        };
+        let flat = |&(a, b): &(u32, u32)| {
+            let bits = node_bits(a);
+            bits != 0 && (a == b || bits & node_bits(b) != 0)
+        };
+        // The pairs no longer flat go to `failed`, for `search` to take up.
+        self.failed.clear();
+        self.failed.extend(self.culled.iter().filter(|c| !flat(c)));
+        if self.failed.is_empty() {
+            return true;
+        }
+        let failed = &self.failed;
+        self.culled.retain(|c| !failed.contains(c));
+        false
+    }
+
+    /// The nodes' cone bits (and boxes, with `boxes`) from their triangles', bottom-up.
+    fn refit_nodes(&mut self, boxes: bool) {
+        for n in (0..self.nodes.len()).rev() {
+            let node = self.nodes[n];
+            if node.child == 0 {
+                let ts = &self.order[node.start as usize..node.end as usize];
+                let mut bits = u32::MAX;
+                let mut bx = (Vec3A::MAX, Vec3A::MIN);
+                for &t in ts {
+                    bits &= self.tbits[t as usize];
+                    if boxes {
+                        bx = union32(bx, self.tbox[t as usize]);
+                    }
+                }
+                self.nbits[n] = bits;
+                if boxes {
+                    self.nbox[n] = bx;
+                }
+            } else {
+                let (l, r) = (node.child as usize, node.child as usize + 1);
+                self.nbits[n] = self.nbits[l] & self.nbits[r];
+                if boxes {
+                    self.nbox[n] = union32(self.nbox[l], self.nbox[r]);
+                }
+            }
+        }
+    }
+
+    /// Walks the tree against itself (after [`SurfaceTree::refit`]) and calls `pt(p, t)` for
+    /// every point–triangle pair and `ee(e, f)` for every edge–edge pair (edge indices) whose
+    /// boxes overlap, neither sharing a particle, each once; flat connected nodes are culled.
+    ///
+    /// With `resume`, only the node pairs that [`SurfaceTree::still_flat`] found no longer
+    /// flat are walked (the boxes of the last refit still holding the paths, and the bits
+    /// those of the paths now): the pairs they hold are added to what the last search found.
+    pub fn search(
+        &mut self,
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
+        vbox: &[Aabb],
+        resume: bool,
+        mut pt: impl FnMut(u32, u32),
+        mut ee: impl FnMut(u32, u32),
+    ) {
+        self.visits = 0;
+        self.triangle_pairs = 0;
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        if resume {
+            self.refit_nodes(false);
+            stack.extend(self.failed.iter().map(|&(a, b)| (a, b, true)));
+            self.failed.clear();
+        } else {
+            self.culled.clear();
+            self.failed.clear();
+            stack.push((0, 0, false));
+        }
+        let tri_box = |t: [u32; 3]| {
+            let b = t.map(|i| vbox[i as usize]);
+            union(union(b[0], b[1]), b[2])
+        };
+        let mut pair = |me: &Self, t: u32, u: u32| {
+            if !overlap32(&me.tbox[t as usize], &me.tbox[u as usize]) {
+                return;
+            }
+            let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
+            let (tb, ub) = (&tri_box(tt), &tri_box(tu));
+            for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
+                for &p in &me.owned_vertices[own as usize] {
+                    if p != NONE && !other_tri.contains(&p) && overlap(&vbox[p as usize], ob) {
+                        pt(p, other);
+                    }
+                }
+            }
+            for &e in &me.owned_edges[t as usize] {
+                if e == NONE {
+                    continue;
+                }
+                let ea = edges[e as usize];
+                let eb = union(vbox[ea[0] as usize], vbox[ea[1] as usize]);
+                for &f in &me.owned_edges[u as usize] {
+                    if f == NONE {
+                        continue;
+                    }
+                    let fa = edges[f as usize];
+                    if fa.contains(&ea[0]) || fa.contains(&ea[1]) {
+                        continue;
+                    }
+                    let fb = union(vbox[fa[0] as usize], vbox[fa[1] as usize]);
+                    if overlap(&eb, &fb) {
+                        ee(e, f);
+                    }
+                }
+            }
+        };
+        let mut visits = 0u64;
+        let mut tests = 0u64;
+        while let Some((a, b, keep)) = stack.pop() {
+            visits += 1;
+            let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
+            if a == b {
+                if !keep && na.connected && self.nbits[a as usize] != 0 {
+                    self.culled.push((a, a));
+                    continue;
+                }
+                if na.child == 0 {
+                    let ts = &self.order[na.start as usize..na.end as usize];
+                    for i in 0..ts.len() {
+                        for j in i + 1..ts.len() {
+                            tests += 1;
+                            pair(self, ts[i], ts[j]);
+                        }
+                    }
+                } else {
+                    let (l, r) = (na.child, na.child + 1);
+                    stack.push((l, r, false));
+                    stack.push((r, r, false));
+                    stack.push((l, l, false));
+                }
+                continue;
+            }
+            if !overlap32(&self.nbox[a as usize], &self.nbox[b as usize]) {
+                continue;
+            }
+            // Two flat pieces that meet along an edge and share a hemisphere are one flat
+            // piece (Tang et al.'s culling between adjacent patches).
+            if !keep
+                && na.connected
+                && nb.connected
+                && self.nbits[a as usize] & self.nbits[b as usize] != 0
+                && self.adjacent(a, b)
+            {
+                self.culled.push((a, b));
+                continue;
+            }
+            match (na.child == 0, nb.child == 0) {
+                (true, true) => {
+                    for &t in &self.order[na.start as usize..na.end as usize] {
+                        for &u in &self.order[nb.start as usize..nb.end as usize] {
+                            tests += 1;
+                            pair(self, t, u);
+                        }
+                    }
+                }
+                (false, true) => {
+                    stack.push((na.child + 1, b, false));
+                    stack.push((na.child, b, false));
+                }
+                (true, false) => {
+                    stack.push((a, nb.child + 1, false));
+                    stack.push((a, nb.child, false));
+                }
+                (false, false) => {
+                    if na.end - na.start >= nb.end - nb.start {
+                        stack.push((na.child + 1, b, false));
+                        stack.push((na.child, b, false));
+                    } else {
+                        stack.push((a, nb.child + 1, false));
+                        stack.push((a, nb.child, false));
+                    }
+                }
+            }
+        }
+        self.stack = stack;
+        self.visits = visits;
+        self.triangle_pairs = tests;
+    }
+}
+
+/// A cluster of triangles while the tree is built.
+struct Cluster {
+    bx: Aabb,
+    size: u32,
+    children: Option<(u32, u32)>,
+    alive: bool,
+    neighbours: Vec<u32>,
+}
+
+/// Joins the clusters `roots` under new clusters by median splits of their boxes' centres
+/// along the longest extent; returns the top one.
+fn join(cl: &mut Vec<Cluster>, roots: &mut [u32]) -> u32 {
+    if roots.len() == 1 {
+        return roots[0];
+    }
+    let centre = |cl: &[Cluster], c: u32| {
+        let b = cl[c as usize].bx;
+        0.5 * (b.0 + b.1)
+    };
+    let (lo, hi) = roots.iter().fold((DVec3::MAX, DVec3::MIN), |(l, h), &c| {
+        (l.min(centre(cl, c)), h.max(centre(cl, c)))
+    });
+    let axis = longest_axis(hi - lo);
+    let mid = roots.len() / 2;
+    roots.select_nth_unstable_by(mid, |&a, &b| {
+        centre(cl, a)[axis]
+            .total_cmp(&centre(cl, b)[axis])
+            .then(a.cmp(&b))
+    });
+    let (l, r) = roots.split_at_mut(mid);
+    let (a, b) = (join(cl, l), join(cl, r));
+    cl.push(Cluster {
+        bx: union(cl[a as usize].bx, cl[b as usize].bx),
+        size: cl[a as usize].size + cl[b as usize].size,
+        children: Some((a, b)),
+        alive: true,
+        neighbours: Vec::new(),
+    });
+    cl.len() as u32 - 1
+}
+
+fn longest_axis(d: DVec3) -> usize {
+    if d.x >= d.y && d.x >= d.z {
+        0
+    } else if d.y >= d.z {
+        1
+    } else {
+        2
+    }
+}
+
+/// Whether the triangles `range` (of node `node`) are one piece across shared edges: a
+/// union–find over them (`stamp` marks membership, `parent` is scratch).
+#[allow(clippy::too_many_arguments)]
+fn connected(
+    range: &[u32],
+    tri_edges: &[[u32; 3]],
+    edge_start: &[u32],
+    edge_tris: &[u32],
+    node: u32,
+    stamp: &mut [u32],
+    parent: &mut [u32],
+) -> bool {
+    for &t in range {
+        stamp[t as usize] = node;
+        parent[t as usize] = t;
+    }
+    let mut pieces = range.len();
+    for &t in range {
+        for &e in tri_edges[t as usize].iter().filter(|&&e| e != NONE) {
+            let e = e as usize;
+            for &u in &edge_tris[edge_start[e] as usize..edge_start[e + 1] as usize] {
+                if u != t && stamp[u as usize] == node {
+                    let (rt, ru) = (super::find(parent, t), super::find(parent, u));
+                    if rt != ru {
+                        parent[rt.max(ru) as usize] = rt.min(ru);
+                        pieces -= 1;
+                    }
+                }
+            }
+        }
+    }
+    pieces == 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::forces::wind::unit;
+    use crate::core::self_contact::ContactSurface;
+    use std::collections::BTreeSet;
+
+    fn rand_unit(seed: &mut u64) -> DVec3 {
+        loop {
+            let v = DVec3::new(unit(seed), unit(seed), unit(seed)) * 2.0 - 1.0;
+            if v.length_squared() > 1e-3 && v.length_squared() <= 1.0 {
+                return v.normalize();
+            }
+        }
+    }
+
+    fn f(v: DVec3) -> Vec3A {
+        v.as_vec3a()
+    }
+
+    const ANY: Span = (Vec3A::ZERO, Vec3A::splat(f32::INFINITY));
+
+    #[test]
+    fn the_26_directions_cover_the_sphere_within_28_degrees() {
+        // The docs' claim: no direction lies farther than 28° from the nearest of the 26, so
+        // every cone of half-angle up to 62° lies in one of their hemispheres.
+        let dirs: Vec<DVec3> = DIRECTIONS
+            .iter()
+            .flat_map(|d| {
+                let v = DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64).normalize();
+                [v, -v]
+            })
+            .collect();
+        let mut seed = 7;
+        let worst = (0..20_000)
+            .map(|_| {
+                let v = rand_unit(&mut seed);
+                dirs.iter().map(|d| d.dot(v)).fold(-1.0, f64::max).acos()
+            })
+            .fold(0.0, f64::max);
+        assert!(worst.to_degrees() < 28.0, "{}", worst.to_degrees());
+        // Triangles with normals in a random 61° cone all share a direction.
+        for _ in 0..200 {
+            let axis = rand_unit(&mut seed);
+            let mut bits = u32::MAX;
+            for _ in 0..50 {
+                // A normal within 61° of the axis.
+                let n = loop {
+                    let n = rand_unit(&mut seed);
+                    if n.dot(axis) >= 61f64.to_radians().cos() {
+                        break n;
+                    }
+                };
+                let (u, v) = n.any_orthonormal_pair();
+                let tri = [DVec3::ZERO, u * 0.1, v * 0.1].map(f);
+                bits &= triangle_bits(tri, tri, 0.1, ANY);
+            }
+            assert_ne!(bits, 0);
+        }
+    }
+
+    #[test]
+    fn cone_bits_hold_all_along_the_straight_paths() {
+        // Independent check: the normal of the triangle interpolated at many instants, in
+        // f64, against every direction whose bit is set.
+        let mut seed = 11;
+        let mut set = 0;
+        for _ in 0..20_000 {
+            let base = DVec3::new(unit(&mut seed), unit(&mut seed), unit(&mut seed));
+            let p0 = [0, 1, 2].map(|_| base + rand_unit(&mut seed) * 0.02);
+            // Moves up to about the triangle's size: normals may turn over.
+            let p1 = p0.map(|p| p + rand_unit(&mut seed) * 0.02 * unit(&mut seed));
+            let qmax = p0
+                .iter()
+                .chain(&p1)
+                .map(|p| p.abs().max_element())
+                .fold(0.0, f64::max);
+            let bits = triangle_bits(p0.map(f), p1.map(f), qmax as f32, ANY);
+            for k in 0..26 {
+                if bits & (1 << k) == 0 {
+                    continue;
+                }
+                set += 1;
+                let d = DIRECTIONS[k % 13];
+                let d = DVec3::new(d[0] as f64, d[1] as f64, d[2] as f64)
+                    * if k < 13 { 1.0 } else { -1.0 };
+                for s in 0..=64 {
+                    let tau = s as f64 / 64.0;
+                    let p = [0, 1, 2].map(|i| p0[i].lerp(p1[i], tau));
+                    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+                    assert!(n.dot(d) > 0.0, "bit {k} at τ = {tau}: {p0:?} → {p1:?}");
+                }
+            }
+        }
+        assert!(set > 10_000, "the check saw too few bits: {set}");
+    }
+
+    /// A grid of `n × n` vertices (spacing `h`) in the plane y = 0, folded by `fold` about
+    /// the line x = `x_fold`: the part beyond goes back over the rest at a height `gap`.
+    fn folded_grid(n: usize, h: f64, x_fold: f64, gap: f64) -> (Vec<[u32; 3]>, Vec<DVec3>) {
+        let mut x = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (u, z) = (i as f64 * h, j as f64 * h);
+                let p = if u <= x_fold {
+                    DVec3::new(u, 0.0, z)
+                } else {
+                    // Around a half circle of diameter `gap`, then back.
+                    let s = u - x_fold;
+                    let r = 0.5 * gap;
+                    let arc = std::f64::consts::PI * r;
+                    if s <= arc {
+                        let a = s / r;
+                        DVec3::new(x_fold + r * a.sin(), r - r * a.cos(), z)
+                    } else {
+                        DVec3::new(x_fold - (s - arc), gap, z)
+                    }
+                };
+                x.push(p);
+            }
+        }
+        let mut tris = Vec::new();
+        let id = |i: usize, j: usize| (j * n + i) as u32;
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                tris.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                tris.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        (tris, x)
+    }
+
+    type Pairs = (BTreeSet<(u32, u32)>, BTreeSet<(u32, u32)>);
+
+    /// The tree's pairs for a still surface with vertex boxes grown by `m`.
+    fn tree_pairs(tris: &[[u32; 3]], x: &[DVec3], m: f64) -> Pairs {
+        let surf = ContactSurface::new(tris);
+        let mut tree = SurfaceTree::default();
+        tree.build(tris, &surf.edges, x);
+        tree.load(&surf.vertices, x, x);
+        tree.refit(tris, m);
+        let vbox: Vec<Aabb> = x.iter().map(|&p| (p - m, p + m)).collect();
+        let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
+        let (mut npt, mut nee) = (0, 0);
+        tree.search(
+            tris,
+            &surf.edges,
+            &vbox,
+            false,
+            |p, t| {
+                npt += 1;
+                pt.insert((p, t));
+            },
+            |e, f| {
+                nee += 1;
+                ee.insert((e.min(f), e.max(f)));
+            },
+        );
+        assert_eq!(npt + nee, pt.len() + ee.len(), "a pair was reported twice");
+        TESTED.with(|c| c.set(tree.triangle_pairs));
+        (pt, ee)
+    }
+
+    thread_local! {
+        /// Triangle pairs the last `tree_pairs` compared.
+        static TESTED: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+    }
+
+    /// Every point–triangle and edge–edge pair (no shared particle) whose boxes overlap, or
+    /// (with `within`) whose features are closer than that: all pairs, no tree.
+    fn brute_pairs(tris: &[[u32; 3]], x: &[DVec3], m: f64, within: Option<f64>) -> Pairs {
+        use crate::core::self_contact::{closest_between_segments, closest_on_triangle};
+        let surf = ContactSurface::new(tris);
+        let bx = |ids: &[u32]| {
+            ids.iter().fold((DVec3::MAX, DVec3::MIN), |(l, h), &i| {
+                (l.min(x[i as usize] - m), h.max(x[i as usize] + m))
+            })
+        };
+        let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
+        for &p in &surf.vertices {
+            for (t, tri) in tris.iter().enumerate() {
+                if tri.contains(&p) {
+                    continue;
+                }
+                let keep = match within {
+                    None => overlap(&bx(&[p]), &bx(tri)),
+                    Some(d) => {
+                        let y = tri.map(|i| x[i as usize]);
+                        let b = closest_on_triangle(x[p as usize], y[0], y[1], y[2]);
+                        let q = y[0] * b[0] + y[1] * b[1] + y[2] * b[2];
+                        x[p as usize].distance(q) < d
+                    }
+                };
+                if keep {
+                    pt.insert((p, t as u32));
+                }
+            }
+        }
+        for (e, a) in surf.edges.iter().enumerate() {
+            for (g, b) in surf.edges.iter().enumerate().skip(e + 1) {
+                if b.contains(&a[0]) || b.contains(&a[1]) {
+                    continue;
+                }
+                let keep = match within {
+                    None => overlap(&bx(a), &bx(b)),
+                    Some(d) => {
+                        let [p1, q1, p2, q2] = [a[0], a[1], b[0], b[1]].map(|i| x[i as usize]);
+                        let (s, t) = closest_between_segments(p1, q1, p2, q2);
+                        p1.lerp(q1, s).distance(p2.lerp(q2, t)) < d
+                    }
+                };
+                if keep {
+                    ee.insert((e as u32, g as u32));
+                }
+            }
+        }
+        (pt, ee)
+    }
+
+    #[test]
+    fn without_flat_patches_the_search_finds_exactly_the_overlapping_pairs() {
+        // A soup of random small triangles (no shared edges, normals everywhere: nothing is
+        // culled) sharing some vertices.
+        let mut seed = 3;
+        let x: Vec<DVec3> = (0..120)
+            .map(|_| DVec3::new(unit(&mut seed), unit(&mut seed), unit(&mut seed)) * 0.3)
+            .collect();
+        let tris: Vec<[u32; 3]> = (0..150)
+            .map(|_| {
+                loop {
+                    let t = [0, 1, 2].map(|_| (unit(&mut seed) * 120.0) as u32);
+                    if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
+                        break t;
+                    }
+                }
+            })
+            .collect();
+        let m = 0.02;
+        let found = tree_pairs(&tris, &x, m);
+        let all = brute_pairs(&tris, &x, m, None);
+        assert!(
+            all.0.len() > 100 && all.1.len() > 100,
+            "{} {}",
+            all.0.len(),
+            all.1.len()
+        );
+        assert_eq!(found, all);
+    }
+
+    #[test]
+    fn a_flat_sheet_is_culled_whole_and_a_folded_one_keeps_every_near_pair() {
+        let (h, m) = (0.02, 0.004);
+        // Flat: nothing to test.
+        let (tris, x) = folded_grid(24, h, 1.0, 0.0);
+        let (pt, ee) = tree_pairs(&tris, &x, m);
+        assert!(pt.is_empty() && ee.is_empty(), "{} {}", pt.len(), ee.len());
+        assert_eq!(TESTED.with(|c| c.get()), 0);
+        // Folded over itself at a gap of 6 mm: every pair closer than the boxes' margins (the
+        // exact distance, computed apart from the tree) is among the candidates.
+        let (tris, x) = folded_grid(24, h, 0.25, 0.006);
+        let found = tree_pairs(&tris, &x, m);
+        let near = brute_pairs(&tris, &x, m, Some(2.0 * m));
+        let all = brute_pairs(&tris, &x, m, None);
+        assert!(near.0.len() > 200, "the layers are near: {}", near.0.len());
+        assert!(
+            near.0.is_subset(&found.0),
+            "{:?}",
+            near.0.difference(&found.0).next()
+        );
+        assert!(
+            near.1.is_subset(&found.1),
+            "{:?}",
+            near.1.difference(&found.1).next()
+        );
+        assert!(found.0.is_subset(&all.0) && found.1.is_subset(&all.1));
+        // Flat parts cost little: of the 560,000 triangle pairs, those compared are a few
+        // per triangle of the two layers.
+        let tested = TESTED.with(|c| c.get());
+        assert!(tested < 20 * tris.len() as u64, "{tested}");
+    }
+
+    #[test]
+    fn stretched_triangles_are_never_culled() {
+        let tri = [DVec3::ZERO, DVec3::X * 0.1, DVec3::Z * 0.1];
+        let l = Vec3A::new(0.01, 0.01, 0.02);
+        let d2 = DISTORTION * DISTORTION;
+        let span = (l / d2, l * d2);
+        let q = tri.map(f);
+        assert_ne!(triangle_bits(q, q, 0.1, span), 0);
+        let far = [tri[0], tri[1] * 1.6, tri[2]].map(f);
+        assert_eq!(triangle_bits(q, far, 0.16, span), 0);
+        let near = [tri[0], tri[1] * 0.6, tri[2]].map(f);
+        assert_eq!(triangle_bits(near, q, 0.1, span), 0);
+    }
+}
