@@ -40,7 +40,7 @@
 //! each owns against the other and the edge–edge pairs of the edges they own, so every
 //! feature pair comes from exactly one triangle pair and is found once.
 
-use glam::{DVec3, Vec3A, Vec4};
+use glam::{DVec3, Mat4, Vec3A, Vec4};
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -140,6 +140,167 @@ pub(super) fn triangle_bits(p0: [Vec3A; 3], p1: [Vec3A; 3], qmax: f32, span: Spa
     bits
 }
 
+/// Four `f32` lanes: one per triangle of a batch (glam's SIMD vector).
+type Lanes = Vec4;
+
+/// Three components, each four lanes.
+type Lanes3 = [Lanes; 3];
+
+#[inline(always)]
+fn sub3(a: Lanes3, b: Lanes3) -> Lanes3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+#[inline(always)]
+fn cross3(a: Lanes3, b: Lanes3) -> Lanes3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[inline(always)]
+fn len2(a: Lanes3) -> Lanes {
+    a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+}
+
+/// The dot products with the 13 [`DIRECTIONS`], in order.
+#[inline(always)]
+fn dots13(b: Lanes3) -> [Lanes; 13] {
+    let [x, y, z] = b;
+    let (xy, x_y) = (x + y, x - y);
+    [
+        x,
+        y,
+        z,
+        xy,
+        x_y,
+        x + z,
+        x - z,
+        y + z,
+        y - z,
+        xy + z,
+        xy - z,
+        x_y + z,
+        x_y - z,
+    ]
+}
+
+/// [`triangle_bits`] for four triangles at once, from their edges `e` (`[e₀, f₀, e₁, f₁]`:
+/// the edges from the first vertex at the start and the end, component-wise in lanes) and
+/// spans. Computes the same thing with the same operations in the same order, so the same
+/// bits (checked in the tests).
+#[inline(always)]
+fn triangle_bits4(e: [Lanes3; 4], span_lo: Lanes3, span_hi: Lanes3, qmax: f32) -> [u32; 4] {
+    let [e0, f0, e1, f1] = e;
+    let n0 = cross3(e0, f0);
+    let n1 = cross3(e1, f1);
+    let dd = cross3(sub3(e1, e0), sub3(f1, f0));
+    let half = Vec4::splat(0.5);
+    let b1 = [
+        half * (n0[0] + n1[0] - dd[0]),
+        half * (n0[1] + n1[1] - dd[1]),
+        half * (n0[2] + n1[2] - dd[2]),
+    ];
+    let l0 = [len2(e0), len2(f0), len2(sub3(f0, e0))];
+    let l1 = [len2(e1), len2(f1), len2(sub3(f1, e1))];
+    let amax = |a: Lanes3, b: Lanes3| {
+        a[0].abs()
+            .max(b[0].abs())
+            .max(a[1].abs().max(b[1].abs()))
+            .max(a[2].abs().max(b[2].abs()))
+    };
+    let (emax, fmax) = (amax(e0, e1), amax(f0, f1));
+    let eps = Vec4::splat(12.0 * f32::EPSILON);
+    let tol = eps * (Vec4::splat(2.0 * qmax) * (emax + fmax) + Vec4::splat(4.0) * emax * fmax);
+    let (d0, d1, d2) = (dots13(n0), dots13(b1), dots13(n1));
+    // Each lane's bits summed as powers of two in `f32` (exact: at most 2¹³ − 1).
+    let (mut pos, mut neg) = (Vec4::ZERO, Vec4::ZERO);
+    for k in 0..13 {
+        let lo = d0[k].min(d1[k]).min(d2[k]);
+        let hi = d0[k].max(d1[k]).max(d2[k]);
+        let bit = Vec4::splat((1u32 << k) as f32);
+        pos += Vec4::select(lo.cmpgt(tol), bit, Vec4::ZERO);
+        neg += Vec4::select(hi.cmplt(-tol), bit, Vec4::ZERO);
+    }
+    let mut within = Vec4::ONE;
+    for k in 0..3 {
+        let ok = l0[k].cmpge(span_lo[k])
+            & l0[k].cmple(span_hi[k])
+            & l1[k].cmpge(span_lo[k])
+            & l1[k].cmple(span_hi[k]);
+        within = Vec4::select(ok, within, Vec4::ZERO);
+    }
+    let (pos, neg) = ((pos * within).to_array(), (neg * within).to_array());
+    let bits = |l: usize| pos[l] as u32 | (neg[l] as u32) << 13;
+    [bits(0), bits(1), bits(2), bits(3)]
+}
+
+/// The spans of each batch of four triangles, lane per triangle (low x, y, z, high x, y, z).
+fn span_lanes(span: &[Span]) -> impl Iterator<Item = [Vec4; 6]> + '_ {
+    span.chunks_exact(4).map(|c| {
+        let lane = |f: fn(&Span) -> f32| Vec4::new(f(&c[0]), f(&c[1]), f(&c[2]), f(&c[3]));
+        [
+            lane(|s| s.0.x),
+            lane(|s| s.0.y),
+            lane(|s| s.0.z),
+            lane(|s| s.1.x),
+            lane(|s| s.1.y),
+            lane(|s| s.1.z),
+        ]
+    })
+}
+
+/// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, four at a
+/// time.
+fn all_bits(
+    triangles: &[[u32; 3]],
+    q0: &[Vec3A],
+    q1: &[Vec3A],
+    qmax: f32,
+    span: &[Span],
+    span4: &[[Vec4; 6]],
+    out: &mut [u32],
+) {
+    let batches = triangles.len() / 4;
+    for c in 0..batches {
+        let ts = &triangles[4 * c..4 * c + 4];
+        // Each lane's four edges, transposed into components (a 4 × 4 transpose).
+        let edges = ts.iter().map(|t| {
+            let [a, b, cc] = t.map(|i| i as usize);
+            [q0[b] - q0[a], q0[cc] - q0[a], q1[b] - q1[a], q1[cc] - q1[a]]
+        });
+        let mut cols = [[Vec4::ZERO; 4]; 4];
+        for (l, e) in edges.enumerate() {
+            for k in 0..4 {
+                cols[k][l] = e[k].extend(0.0);
+            }
+        }
+        let lanes = |c: &[Vec4; 4]| {
+            let m = Mat4::from_cols(c[0], c[1], c[2], c[3]).transpose();
+            [m.x_axis, m.y_axis, m.z_axis]
+        };
+        let e = [
+            lanes(&cols[0]),
+            lanes(&cols[1]),
+            lanes(&cols[2]),
+            lanes(&cols[3]),
+        ];
+        let [lo_x, lo_y, lo_z, hi_x, hi_y, hi_z] = span4[c];
+        out[4 * c..4 * c + 4].copy_from_slice(&triangle_bits4(
+            e,
+            [lo_x, lo_y, lo_z],
+            [hi_x, hi_y, hi_z],
+            qmax,
+        ));
+    }
+    for t in 4 * batches..triangles.len() {
+        let [a, b, c] = triangles[t].map(|i| i as usize);
+        out[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
+    }
+}
+
 /// A box in `f32`.
 type Box32 = (Vec3A, Vec3A);
 
@@ -183,6 +344,9 @@ pub(super) struct SurfaceTree {
     built_for: usize,
     /// Per triangle: the squared edge lengths it may have and still be culled.
     span: Vec<Span>,
+    /// The same for each batch of four triangles, lane per triangle (low x, y, z, high x,
+    /// y, z).
+    span4: Vec<[Vec4; 6]>,
     /// Per vertex (compressed rows): the triangles around it.
     vertex_start: Vec<u32>,
     vertex_tris: Vec<u32>,
@@ -261,6 +425,8 @@ impl SurfaceTree {
             );
             (l / d2, l * d2)
         }));
+        self.span4.clear();
+        self.span4.extend(span_lanes(&self.span));
 
         // Ownership: the first triangle holding a vertex or an edge owns it.
         let nv = x.len();
@@ -560,8 +726,16 @@ impl SurfaceTree {
             let lo = s[0].min(s[1]).min(s[2]).min(e[0].min(e[1]).min(e[2]));
             let hi = s[0].max(s[1]).max(s[2]).max(e[0].max(e[1]).max(e[2]));
             self.tbox[t] = (lo - m, hi + m);
-            self.tbits[t] = triangle_bits(s, e, qmax, self.span[t]);
         }
+        all_bits(
+            triangles,
+            q0,
+            q1,
+            qmax,
+            &self.span,
+            &self.span4,
+            &mut self.tbits,
+        );
         self.refit_nodes(true);
     }
 
@@ -582,13 +756,13 @@ impl SurfaceTree {
             return true;
         }
         let (q0, q1, qmax, tbits) = (&self.q0, &self.q1, self.qmax, &mut self.tbits);
-        let span = &self.span;
+        let (span, span4) = (&self.span, &self.span4);
         let mut bits_of = |t: usize| {
             let [a, b, c] = triangles[t].map(|i| i as usize);
             tbits[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
         };
         match moved {
-            None => (0..triangles.len()).for_each(&mut bits_of),
+            None => all_bits(triangles, q0, q1, qmax, span, span4, tbits),
             Some(moved) => {
                 for &v in moved {
                     let v = v as usize;
@@ -1158,6 +1332,47 @@ mod tests {
         // per triangle of the two layers.
         let tested = TESTED.with(|c| c.get());
         assert!(tested < 20 * tris.len() as u64, "{tested}");
+    }
+
+    #[test]
+    fn the_batched_cone_bits_are_the_reference_bits() {
+        // Random triangles and motions (some past their spans, some turning over), in a
+        // count that leaves a remainder after the batches of four.
+        let mut seed = 5;
+        let n = 403;
+        let q0: Vec<Vec3A> = (0..3 * n)
+            .map(|_| {
+                f(DVec3::new(
+                    unit(&mut seed),
+                    unit(&mut seed),
+                    unit(&mut seed),
+                ))
+            })
+            .collect();
+        let q1: Vec<Vec3A> = q0
+            .iter()
+            .map(|&p| p + f(rand_unit(&mut seed) * 0.3 * unit(&mut seed)))
+            .collect();
+        let tris: Vec<[u32; 3]> = (0..n as u32)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        let span: Vec<Span> = (0..n)
+            .map(|_| {
+                let l = Vec3A::splat(unit(&mut seed) as f32);
+                (l * 0.2, l * 4.0)
+            })
+            .collect();
+        let mut out = vec![0; n];
+        let span4: Vec<[Vec4; 6]> = span_lanes(&span).collect();
+        all_bits(&tris, &q0, &q1, 1.0, &span, &span4, &mut out);
+        let mut set = 0;
+        for (t, tri) in tris.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| i as usize);
+            let want = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], 1.0, span[t]);
+            assert_eq!(out[t], want, "triangle {t}");
+            set += (want != 0) as u32;
+        }
+        assert!(set > 40 && set < n as u32 - 40, "{set}");
     }
 
     #[test]
