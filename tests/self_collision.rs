@@ -10,6 +10,7 @@ mod common;
 use bevy_soft_body::core::build::{ClothParams, ClothPileParams, ClothPins, cloth, cloth_pile};
 use bevy_soft_body::core::scene::ParticleDesc;
 use bevy_soft_body::core::self_contact::{CCD_PASSES, SelfContactParams, SelfContactReport};
+use bevy_soft_body::core::tear::{TearParams, tear_scene};
 use bevy_soft_body::prelude::*;
 use common::intersect::{closest_approach, intersecting_pairs};
 
@@ -149,6 +150,50 @@ fn a_draping_cloth_never_intersects_itself_and_does_without_self_collision() {
     assert!(off.worst_pairs > 0);
     assert!(rep.proximity > 0 && rep.passes > 0);
 }
+
+#[test]
+#[ignore = "fails: tearing with self-collision — the two sides of a cut start coincident (368 intersecting pairs, the fail-safe gives up); pairs across a fresh cut need to count as adjacent until they part"]
+fn a_cloth_that_tears_as_it_drapes_stays_free_of_intersections() {
+    // The pile's 32² cloth with a tearing limit its fall onto the sphere exceeds: it rips
+    // where it hits and drapes in pieces, the cut's two sides starting at one place (each
+    // split particle's copy lies on it) and then pushed apart by the pass. Every frame checked
+    // (before the frame's tear, on the surface the pass resolved).
+    let mut scene = pile(1, true);
+    scene.tearing = Some(TearParams {
+        max_strain: TEAR_LIMIT,
+    });
+    let (model, state) = scene.build().unwrap();
+    let mut sim = Simulation::new(model, state, config());
+    let (mut worst, mut first_bad, mut split, mut broken) = (0, None, 0, 0);
+    let mut closest = f64::INFINITY;
+    for _ in 0..180 {
+        sim.advance_frame().unwrap();
+        let x = positions(&sim.state);
+        assert!(x.iter().flatten().all(|c| c.is_finite()));
+        let tris = &scene.surface.as_ref().unwrap().triangles;
+        let bad = intersecting_pairs(&x, tris);
+        if bad > 0 && first_bad.is_none() {
+            first_bad = Some(sim.frame);
+        }
+        worst = worst.max(bad);
+        closest = closest.min(closest_approach(&x, tris, THICK));
+        let torn = tear_scene(&mut scene, &mut sim).unwrap();
+        split += torn.copies.len();
+        broken += torn.broken.len();
+    }
+    let rep = sim.system.self_contact.as_ref().unwrap().total;
+    println!(
+        "tearing while draping: {split} particles split, {broken} springs broken; worst {worst} intersecting pairs, closest {:.2} mm; failed {}",
+        closest * 1e3,
+        rep.failed
+    );
+    assert!(split > 10, "the cloth must tear: {split}");
+    assert_eq!(worst, 0, "first at frame {first_bad:?}");
+    assert!(!rep.failed);
+}
+
+/// A strain the pile's cloth passes where it lands on the sphere.
+const TEAR_LIMIT: f64 = 0.05;
 
 fn kinetic(sim: &Simulation<ParticleState, ParticleModel>) -> f64 {
     sim.state

@@ -34,7 +34,7 @@
 //! dynamics' steps, as in Bridson et al.), so each pass sees short motions and every frame
 //! ends free of intersections. The geometry is computed in `f64` whatever [`Scalar`] is. The
 //! broad phase is a bounding-volume hierarchy of swept boxes with normal-cone culling of flat
-//! patches ([`tree`]); its candidate pairs are kept across passes while every vertex stays
+//! patches (`tree`); its candidate pairs are kept across passes while every vertex stays
 //! within its box's margin relative to the surface's mean motion (a Verlet list) and the
 //! patches it culled stay flat.
 
@@ -689,7 +689,7 @@ impl Ctx<'_> {
 
     /// Candidate pairs: swept boxes (start to end, grown by the thickness and `grow`) that
     /// overlap; adjacent pairs (sharing a particle) excluded, and pairs within flat connected
-    /// patches culled (see [`tree`]).
+    /// patches culled (see `tree`).
     fn broad_phase(&self, s: &mut Scratch, grow: f64) {
         // Each vertex's path grown by `grow` (where it may go before the next search), and
         // that grown by half the thickness: two sets within the thickness of each other while

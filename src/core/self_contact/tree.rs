@@ -79,7 +79,7 @@ const DIRECTIONS: [[i8; 3]; 13] = [
     [1, -1, -1],
 ];
 
-/// The dot products of `b` with the 13 [`DIRECTIONS`], in order, in four lanes of four (the
+/// The dot products of `b` with the 13 `DIRECTIONS`, in order, in four lanes of four (the
 /// last three lanes repeat the thirteenth).
 #[inline]
 fn direction_dots(b: Vec3A) -> [Vec4; 4] {
@@ -165,7 +165,7 @@ fn len2(a: Lanes3) -> Lanes {
     a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
 }
 
-/// The dot products with the 13 [`DIRECTIONS`], in order.
+/// The dot products with the 13 `DIRECTIONS`, in order.
 #[inline(always)]
 fn dots13(b: Lanes3) -> [Lanes; 13] {
     let [x, y, z] = b;

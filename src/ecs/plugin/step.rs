@@ -316,6 +316,7 @@ pub(super) fn tear(
             continue;
         }
         let Some(sim) = bs.sim.as_ref() else { continue };
+        let self_colliding = sim.system.self_contact.is_some();
         if !sim.state.is_finite() {
             continue;
         }
@@ -412,6 +413,11 @@ pub(super) fn tear(
             commands
                 .entity(body_e)
                 .remove::<crate::render::SurfaceVertices>();
+        }
+        if self_colliding && !torn.copies.is_empty() {
+            warn_once!(
+                "soft body {body_e}: Tearable with SelfCollision: the two sides of a cut start where the particle was split, and the contact pass may not separate them (then the body is held, with SoftBodyStatus::contact_failed)"
+            );
         }
         if mesh_surface && !torn.copies.is_empty() {
             warn_once!(
