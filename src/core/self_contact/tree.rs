@@ -363,15 +363,11 @@ pub(super) struct SurfaceTree {
     q1: Vec<Vec3A>,
     qmax: f32,
     origin: DVec3,
-    /// Per node (compressed rows): the positions in `order` of the triangles outside it that
-    /// share an edge with one inside, ascending.
-    border_start: Vec<u32>,
-    border: Vec<u32>,
-    /// Node pairs (a node with itself, or two adjacent nodes) the last search skipped as flat:
-    /// their triangles' common bits must stay non-empty for its pairs to stay complete.
-    culled: Vec<(u32, u32)>,
-    /// Culled pairs found no longer flat, not yet walked.
-    failed: Vec<(u32, u32)>,
+    /// Nodes the last search did not test against themselves as flat: their triangles'
+    /// common bits must stay non-empty for its pairs to stay complete.
+    culled: Vec<u32>,
+    /// Culled nodes found no longer flat, not yet walked.
+    failed: Vec<u32>,
     stack: Vec<(u32, u32, bool)>,
     /// Counters of the last search: node pairs visited and triangle pairs tested.
     pub visits: u64,
@@ -641,38 +637,6 @@ impl SurfaceTree {
             );
         }
 
-        // Each node's border, for telling whether two nodes meet along an edge.
-        let mut pos = vec![0u32; nt];
-        for (k, &t) in self.order.iter().enumerate() {
-            pos[t as usize] = k as u32;
-        }
-        self.border_start.clear();
-        self.border.clear();
-        self.border_start.push(0);
-        for node in &self.nodes {
-            let from = self.border.len();
-            for &t in &self.order[node.start as usize..node.end as usize] {
-                for &e in tri_edges[t as usize].iter().filter(|&&e| e != NONE) {
-                    let e = e as usize;
-                    for &u in &edge_tris[edge_start[e] as usize..edge_start[e + 1] as usize] {
-                        let p = pos[u as usize];
-                        if p < node.start || p >= node.end {
-                            self.border.push(p);
-                        }
-                    }
-                }
-            }
-            self.border[from..].sort_unstable();
-            let mut w = from;
-            for r in from..self.border.len() {
-                if w == from || self.border[r] != self.border[w - 1] {
-                    self.border[w] = self.border[r];
-                    w += 1;
-                }
-            }
-            self.border.truncate(w);
-            self.border_start.push(self.border.len() as u32);
-        }
         self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
         self.tbits.resize(nt, 0);
         self.nbox
@@ -739,16 +703,7 @@ impl SurfaceTree {
         self.refit_nodes(true);
     }
 
-    /// Whether nodes `a` and `b` (disjoint) meet along an edge.
-    fn adjacent(&self, a: u32, b: u32) -> bool {
-        let border = &self.border
-            [self.border_start[a as usize] as usize..self.border_start[a as usize + 1] as usize];
-        let nb = self.nodes[b as usize];
-        let k = border.partition_point(|&p| p < nb.start);
-        k < border.len() && border[k] < nb.end
-    }
-
-    /// Whether every node pair the last search culled is still flat along the paths as
+    /// Whether every node the last search culled is still flat along the paths as
     /// [`SurfaceTree::load`]ed: the cone bits of the triangles around the vertices `moved` (all, with
     /// `None`) are recomputed, the others' are those of the same paths.
     pub fn still_flat(&mut self, triangles: &[[u32; 3]], moved: Option<&[u32]>) -> bool {
@@ -781,11 +736,8 @@ impl SurfaceTree {
                 .iter()
                 .fold(u32::MAX, |b, &t| b & self.tbits[t as usize])
         };
-        let flat = |&(a, b): &(u32, u32)| {
-            let bits = node_bits(a);
-            bits != 0 && (a == b || bits & node_bits(b) != 0)
-        };
-        // The pairs no longer flat go to `failed`, for `search` to take up.
+        let flat = |&n: &u32| node_bits(n) != 0;
+        // The nodes no longer flat go to `failed`, for `search` to take up.
         self.failed.clear();
         self.failed.extend(self.culled.iter().filter(|c| !flat(c)));
         if self.failed.is_empty() {
@@ -828,7 +780,7 @@ impl SurfaceTree {
     /// every point–triangle pair and `ee(e, f)` for every edge–edge pair (edge indices) whose
     /// boxes overlap, neither sharing a particle, each once; flat connected nodes are culled.
     ///
-    /// With `resume`, only the node pairs that [`SurfaceTree::still_flat`] found no longer
+    /// With `resume`, only the nodes that [`SurfaceTree::still_flat`] found no longer
     /// flat are walked (the boxes of the last refit still holding the paths, and the bits
     /// those of the paths now): the pairs they hold are added to what the last search found.
     pub fn search(
@@ -849,7 +801,7 @@ impl SurfaceTree {
         stack.clear();
         if resume {
             self.refit_nodes(false);
-            stack.extend(self.failed.iter().map(|&(a, b)| (a, b, true)));
+            stack.extend(self.failed.iter().map(|&n| (n, n, true)));
             self.failed.clear();
         } else {
             self.culled.clear();
@@ -901,7 +853,7 @@ impl SurfaceTree {
             let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
             if a == b {
                 if !keep && na.connected && self.nbits[a as usize] != 0 {
-                    self.culled.push((a, a));
+                    self.culled.push(a);
                     continue;
                 }
                 if na.child == 0 {
@@ -921,17 +873,6 @@ impl SurfaceTree {
                 continue;
             }
             if !overlap32(&self.nbox[a as usize], &self.nbox[b as usize]) {
-                continue;
-            }
-            // Two flat pieces that meet along an edge and share a hemisphere are one flat
-            // piece (Tang et al.'s culling between adjacent patches).
-            if !keep
-                && na.connected
-                && nb.connected
-                && self.nbits[a as usize] & self.nbits[b as usize] != 0
-                && self.adjacent(a, b)
-            {
-                self.culled.push((a, b));
                 continue;
             }
             match (na.child == 0, nb.child == 0) {
