@@ -12,8 +12,10 @@
 //! cannot touch itself (Volino and Magnenat-Thalmann, *Efficient self-collision detection on
 //! smoothly discretized surface animations using geometrical shape regularity*, 1994;
 //! Provot, *Collision and self-collision handling in cloth model dedicated to design
-//! garments*, 1997), so the self-test of such a node stops there: a smooth sheet, falling or
-//! draped, costs one test at the root, and a folded one costs its folds. The hemisphere must
+//! garments*, 1997), so the self-test of such a node stops there: a flat sheet costs one test
+//! at the root, a draped or folded one the seams between its flat nodes (walked down to their
+//! leaves: two flat nodes side by side are not culled against each other — that culling, tried,
+//! let an intersection through) and its folds. The hemisphere must
 //! hold for the whole motion of the pass: along straight paths a triangle's normal is
 //! `n(τ) = (1−τ)² B₀ + 2τ(1−τ) B₁ + τ² B₂` with `B₀`, `B₂` the normals at the start and end
 //! and `B₁ = ½ (e₀ × f₁ + e₁ × f₀)` (its edges `e`, `f` at the start and end), a combination
