@@ -488,7 +488,7 @@ impl SelfContact {
         let t1 = Instant::now();
         rep.broad += t1 - t0;
         if !rebuilt {
-            ctx.start_distances(s);
+            ctx.start_distances(s, 0);
         }
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
@@ -642,23 +642,9 @@ impl Ctx<'_> {
                     // Walk what is no longer flat (the boxes still hold): its pairs join the
                     // candidates.
                     let from = s.pairs.len();
-                    let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
-                    s.tree.search(
-                        &self.surf.triangles,
-                        &self.surf.edges,
-                        &s.vbox,
-                        true,
-                        |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
-                        |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
-                    );
-                    s.pairs = pairs.into_inner();
-                    s.tested += s.tree.triangle_pairs;
+                    self.walk(s, true);
                     s.resumed += 1;
-                    for k in from..s.pairs.len() {
-                        let pair = s.pairs[k].0;
-                        let y = Self::positions(self.stencil_ids(pair), |i| s.p0[i]);
-                        s.pairs[k].1 = Self::closest(pair, y).1;
-                    }
+                    self.start_distances(s, from);
                 }
                 s.cones_at = s.edits;
                 s.clear_moved();
@@ -671,7 +657,7 @@ impl Ctx<'_> {
         let grow = BROAD_GROW * self.thick;
         self.broad_phase(s, grow);
         s.broad_ref = mean0;
-        self.start_distances(s);
+        self.start_distances(s, 0);
         // Keep only pairs that can come within the thickness before the next search: each
         // part stays in its box, so within its path now plus the box's growth (its diagonal).
         let slack = 2.0 * 3f64.sqrt() * grow;
@@ -712,25 +698,31 @@ impl Ctx<'_> {
         s.tree.load(&self.surf.vertices, &s.p0, &s.p1);
         s.tree.refit(tris, 0.5 * reach + grow);
         s.pairs.clear();
+        self.walk(s, false);
+        s.cones_at = s.edits;
+        s.clear_moved();
+    }
+
+    /// Walks the tree (all of it, or with `resume` the nodes no longer flat) and appends the
+    /// pairs it finds to the candidates (distance still to be set).
+    fn walk(&self, s: &mut Scratch, resume: bool) {
         let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
         s.tree.search(
-            tris,
-            edges,
+            &self.surf.triangles,
+            &self.surf.edges,
             &s.vbox,
-            false,
+            resume,
             |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
             |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
         );
         s.pairs = pairs.into_inner();
         s.tested += s.tree.triangle_pairs;
-        s.cones_at = s.edits;
-        s.clear_moved();
     }
 
-    /// Each candidate pair's distance at the start of the pass (fixed for the pass: the start
-    /// does not move).
-    fn start_distances(&self, s: &mut Scratch) {
-        for k in 0..s.pairs.len() {
+    /// The distance at the start of the pass (fixed for the pass: the start does not move) of
+    /// each candidate pair from index `from` on.
+    fn start_distances(&self, s: &mut Scratch, from: usize) {
+        for k in from..s.pairs.len() {
             let pair = s.pairs[k].0;
             let ids = self.stencil_ids(pair);
             let y = Self::positions(ids, |i| s.p0[i]);
