@@ -371,8 +371,7 @@ pub(super) struct SurfaceTree {
     /// Culled nodes found no longer flat, not yet walked.
     failed: Vec<u32>,
     stack: Vec<(u32, u32, bool)>,
-    /// Counters of the last search: node pairs visited and triangle pairs tested.
-    pub visits: u64,
+    /// Triangle pairs the last search compared.
     pub triangle_pairs: u64,
 }
 
@@ -794,7 +793,6 @@ impl SurfaceTree {
         mut pt: impl FnMut(u32, u32),
         mut ee: impl FnMut(u32, u32),
     ) {
-        self.visits = 0;
         self.triangle_pairs = 0;
         if self.nodes.is_empty() {
             return;
@@ -848,10 +846,8 @@ impl SurfaceTree {
                 }
             }
         };
-        let mut visits = 0u64;
         let mut tests = 0u64;
         while let Some((a, b, keep)) = stack.pop() {
-            visits += 1;
             let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
             if a == b {
                 if !keep && na.connected && self.nbits[a as usize] != 0 {
@@ -906,7 +902,6 @@ impl SurfaceTree {
             }
         }
         self.stack = stack;
-        self.visits = visits;
         self.triangle_pairs = tests;
     }
 }
