@@ -92,6 +92,7 @@ fn main() {
             triangles: s.triangles,
             uvs: s.uvs,
             color: Color::srgb(0.80, 0.30, 0.25),
+            ..Default::default()
         });
         common::stage_with(
             &mut commands,

@@ -51,7 +51,7 @@ pub mod prelude {
     pub use crate::core::build::{SurfaceParams, SurfaceStiffness};
     pub use crate::core::collide::{ColliderDesc, ContactMaterial, ShapeDesc};
     pub use crate::core::driver::{
-        CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, StepPolicy,
+        CflLimit, Divergence, DivergenceReason, DriverConfig, Simulation, SleepParams, StepPolicy,
     };
     pub use crate::core::fem::NeoHookean;
     pub use crate::core::fem::mesh::TetMesh;
@@ -83,8 +83,9 @@ pub mod prelude {
         ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SelfCollision, SoftBody,
         SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged,
         SoftBodyForceFields, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid,
-        SoftBodyMeshSurface, SoftBodyPlugin, SoftBodyStatus, SoftBodySystems, SoftBodyTorn,
-        SoftBodyWind, SpawnSoftBody, Spring, SpringOf, Tearable, Tet, TetOf, triangle_mesh,
+        SoftBodyMeshSurface, SoftBodyPlugin, SoftBodySleep, SoftBodySleepingDisabled,
+        SoftBodyStatus, SoftBodySystems, SoftBodyTorn, SoftBodyWind, SpawnSoftBody, Spring,
+        SpringOf, Tearable, Tet, TetOf, WakeSoftBody, triangle_mesh,
     };
     #[cfg(feature = "plugin")]
     pub use crate::render::{

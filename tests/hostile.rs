@@ -115,7 +115,15 @@ fn degenerate_springs_pins_and_steps_are_survived() {
             "{kind}: {:?}",
             state(&app, b)
         );
-        assert_eq!(state(&app, all_pinned), BodyState::Running, "{kind}");
+        // Accepted; with nothing free to move it is at rest from the start, and sleeps.
+        assert!(
+            matches!(
+                state(&app, all_pinned),
+                BodyState::Running | BodyState::Sleeping
+            ),
+            "{kind}: {:?}",
+            state(&app, all_pinned)
+        );
         assert_eq!(
             positions(&app, all_pinned),
             vec![Vec3::X, Vec3::Y],

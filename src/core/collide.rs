@@ -318,6 +318,11 @@ impl std::fmt::Debug for Collider {
 }
 
 impl Collider {
+    /// True when it neither moves nor turns.
+    pub fn is_still(&self) -> bool {
+        self.motion.is_still() && self.spin.angular_velocity == Vector::ZERO
+    }
+
     /// A collider from any parry3d shape, moving without turning.
     pub fn new(
         shape: SharedShape,

@@ -217,6 +217,52 @@ impl Default for DriverConfig {
     }
 }
 
+/// When a body at rest stops stepping: once every free part has stayed slower than `speed`
+/// for `time` under steady forces ([`OdeSystem::rest_speed`]), its frames cost nothing until
+/// something wakes it — a frame at whose start the forces are no longer steady (a collider
+/// near it moves, a pin's path moves, a gust or a field that changes with time), or
+/// [`Simulation::wake`] (an edit). A body that wakes must stay still for `time` again before
+/// it sleeps, so one woken every frame never flickers; while it sleeps its state does not
+/// change, so its own jitter cannot wake it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SleepParams {
+    /// Speed (m/s) every free particle must stay below.
+    pub speed: f64,
+    /// How long (s) it must stay below it.
+    pub time: f64,
+}
+
+impl Default for SleepParams {
+    /// 1 cm/s for half a second: a cloth that moves less than a millimetre per tenth of a
+    /// second is still to the eye, and avian's bodies wait the same half second.
+    fn default() -> Self {
+        Self {
+            speed: 0.01,
+            time: 0.5,
+        }
+    }
+}
+
+impl SleepParams {
+    /// Checks the numbers: `Err((field, message))`.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        if !(self.speed.is_finite() && self.speed >= 0.0) {
+            return Err((
+                "speed",
+                format!("must be finite and non-negative (m/s), got {}", self.speed),
+            ));
+        }
+        if !(self.time.is_finite() && self.time >= 0.0) {
+            return Err((
+                "time",
+                format!("must be finite and non-negative (s), got {}", self.time),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// The divergence guard's energy check runs every this many substeps (and on each frame's
 /// last substep).
 pub const GUARD_EVERY: u32 = 64;
@@ -238,6 +284,11 @@ pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
     /// The time in f64: frame ends and substep lengths are computed from it, so frames stay
     /// exactly `frame_dt` long however late (an f32 clock at 10⁴ s resolves only 1 ms).
     time64: f64,
+    /// Sleeping (`None`: never).
+    sleep: Option<SleepParams>,
+    /// How long the body has been still (s).
+    still_for: f64,
+    asleep: bool,
 }
 
 impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
@@ -259,6 +310,44 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             backup,
             energy_bound,
             time64: 0.0,
+            sleep: None,
+            still_for: 0.0,
+            asleep: false,
+        }
+    }
+
+    /// Lets the body sleep when at rest ([`SleepParams`]; `None`, the default: never). Bad
+    /// numbers (see [`SleepParams::validate`]) count as `None`.
+    pub fn set_sleep(&mut self, sleep: Option<SleepParams>) {
+        let sleep = sleep.filter(|p| p.validate().is_ok());
+        if sleep.is_none() {
+            self.wake();
+        }
+        self.sleep = sleep;
+    }
+
+    /// The sleep settings.
+    pub fn sleep(&self) -> Option<SleepParams> {
+        self.sleep
+    }
+
+    /// True while the body sleeps: its frames take no step.
+    pub fn is_asleep(&self) -> bool {
+        self.asleep
+    }
+
+    /// Wakes the body (it steps from the next frame on, and must be still for the sleep
+    /// time again before it sleeps).
+    pub fn wake(&mut self) {
+        self.asleep = false;
+        self.still_for = 0.0;
+    }
+
+    /// Below the sleep speed under steady forces at `t`.
+    fn at_rest(&self, t: Scalar) -> bool {
+        match (self.sleep, self.system.rest_speed(t, &self.state)) {
+            (Some(p), Some(s)) => (s as f64) < p.speed,
+            _ => false,
         }
     }
 
@@ -266,6 +355,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// removes springs), keeping the clock, the frame count, the settings and the energy
     /// guard's bound; the integrator starts afresh (its history belongs to the old layout).
     pub fn replace(&mut self, system: Sys, mut state: S) {
+        self.wake();
         system.apply_constraints(self.time, &mut state);
         self.integrator = Self::build_integrator(&system, &self.config);
         self.backup = state.clone();
@@ -331,6 +421,16 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         if self.time != self.time64 as Scalar {
             // Someone set `time`: follow it.
             self.time64 = self.time as f64;
+        }
+        if self.asleep {
+            if self.at_rest(self.time) {
+                // Nothing moves it: the frame passes without a step.
+                self.time64 = t_end;
+                self.time = t_end as Scalar;
+                self.frame += 1;
+                return Ok(FrameReport::default());
+            }
+            self.wake();
         }
         // The last good state is the one delivered at the end of the previous frame: substeps
         // of a diverging frame may already be far from it while still finite.
@@ -426,6 +526,15 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             });
         }
         self.frame += 1;
+        if let Some(p) = self.sleep {
+            if self.at_rest(self.time) {
+                self.still_for += self.config.frame_dt;
+                // Within round-off of the time: a whole number of frames reaches it.
+                self.asleep = self.still_for >= p.time - 1e-9 * self.config.frame_dt;
+            } else {
+                self.still_for = 0.0;
+            }
+        }
         Ok(rep)
     }
 

@@ -97,6 +97,9 @@ pub struct BodyLayout {
     pub surface: Vec<[u32; 3]>,
     /// Contact of the surface with itself (`None`: none).
     pub self_collision: Option<SelfContactParams>,
+    /// For each particle, the particle it was split from by tearing (empty: none split); see
+    /// [`ContactSurface::torn`].
+    pub torn_from: Vec<u32>,
 }
 
 /// Which part of a layout a problem is in.
@@ -390,9 +393,10 @@ impl BodyLayout {
         model.gravity = self.gravity.to_scalar();
         model.drag = self.drag.to_scalar();
         model.set_wind(self.wind);
-        model.self_contact = self
-            .self_collision
-            .map(|p| SelfContact::new(ContactSurface::new(&self.contact_triangles()), p));
+        model.self_contact = self.self_collision.map(|p| {
+            let surface = ContactSurface::torn(&self.contact_triangles(), &self.torn_from);
+            SelfContact::new(surface, p)
+        });
         for &(p, f) in &self.forces {
             model.set_external_force(p, f.to_scalar());
         }

@@ -53,6 +53,19 @@ pub enum Motion {
 }
 
 impl Motion {
+    /// True when the path stays where it is for all time (fixed, or linear at zero
+    /// velocity, or a circle or swing of zero size or frequency).
+    pub fn is_still(&self) -> bool {
+        match self {
+            Motion::Fixed { .. } => true,
+            Motion::Linear { velocity, .. } => velocity.iter().all(|&c| c == 0.0),
+            Motion::Circle { radius, omega, .. } => *radius == 0.0 || *omega == 0.0,
+            Motion::Oscillate {
+                amplitude, omega, ..
+            } => amplitude.iter().all(|&c| c == 0.0) || *omega == 0.0,
+        }
+    }
+
     /// The PhysBAM slides' wire endpoint: radius 0.5 in the x–z plane, one revolution in
     /// `period` seconds, starting at `(0, 0, 0.5)`.
     pub fn physbam_wire_endpoint(period: f64) -> Self {

@@ -108,6 +108,15 @@ pub trait OdeSystem<S: OdeState>: Sync {
         false
     }
 
+    /// How fast the system moves in `state` at `t`, for sleeping: the largest speed of a free
+    /// part, when nothing drives it but steady forces (no moving pins or colliders, no gusts,
+    /// no field that changes with time); `None` (the default) when something does, or the
+    /// system does not say. A body whose rest speed stays below a threshold for a while
+    /// sleeps ([`crate::core::driver::Simulation::set_sleep`]).
+    fn rest_speed(&self, _t: Scalar, _state: &S) -> Option<Scalar> {
+        None
+    }
+
     /// Called at the start of each frame with the state it starts from (default: nothing).
     fn begin_frame(&mut self, _state: &S) {}
 

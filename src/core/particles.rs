@@ -660,6 +660,31 @@ impl OdeSystem<ParticleState> for ParticleModel {
         Some(self)
     }
 
+    /// The fastest free particle's speed, when only steady forces act: no gusting wind, no
+    /// particle on a moving path, no moving or turning collider, no force field that changes
+    /// with time.
+    fn rest_speed(&self, t: Scalar, state: &ParticleState) -> Option<Scalar> {
+        let gusting = self
+            .wind
+            .as_ref()
+            .is_some_and(|(w, _)| w.enabled && w.gust != 0.0);
+        if gusting
+            || !self.prescribed.iter().all(|(_, m)| m.is_still())
+            || !self.colliders.iter().all(Collider::is_still)
+            || !self.fields.iter().all(|f| f.steady_from(t))
+        {
+            return None;
+        }
+        let v2 = state
+            .v
+            .iter()
+            .zip(&self.inv_mass)
+            .filter(|(_, w)| **w > 0.0)
+            .map(|(v, _)| v.length_squared())
+            .fold(0.0, Scalar::max);
+        Some(v2.sqrt())
+    }
+
     fn begin_frame(&mut self, state: &ParticleState) {
         if let Some(sc) = &mut self.self_contact {
             sc.begin_frame(&state.x);

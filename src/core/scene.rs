@@ -111,6 +111,22 @@ pub struct Surface {
     /// Texture coordinates per particle (empty: none).
     #[serde(default)]
     pub uvs: Vec<[f32; 2]>,
+    /// For each particle, the particle it was split from by tearing (itself if never split;
+    /// empty: nothing torn). Self-collision counts features that meet at a split point as
+    /// adjacent, as they were before the cut ([`ContactSurface`](crate::core::self_contact::ContactSurface)).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub torn_from: Vec<u32>,
+}
+
+impl Surface {
+    /// `torn_from` for `n` particles, filled in as "never split" if it was empty.
+    pub fn torn_from_mut(&mut self, n: usize) -> &mut Vec<u32> {
+        if self.torn_from.len() < n {
+            let from = self.torn_from.len() as u32;
+            self.torn_from.extend(from..n as u32);
+        }
+        &mut self.torn_from
+    }
 }
 
 /// A whole layout.
@@ -324,6 +340,12 @@ impl Scene {
             if !s.uvs.is_empty() && s.uvs.len() != n {
                 err("surface.uvs".into(), "needs one entry per particle");
             }
+            if !s.torn_from.is_empty() && s.torn_from.len() != n {
+                err("surface.torn_from".into(), "needs one entry per particle");
+            }
+            if let Some(k) = s.torn_from.iter().position(|&i| i as usize >= n) {
+                err(format!("surface.torn_from[{k}]"), "index out of range");
+            }
         }
         if errs.is_empty() {
             Ok(())
@@ -398,6 +420,10 @@ impl Scene {
                 _ => vec![],
             },
             self_collision: self.self_collision,
+            torn_from: self
+                .surface
+                .as_ref()
+                .map_or(vec![], |s| s.torn_from.clone()),
         }
     }
 
@@ -462,6 +488,13 @@ impl Scene {
             let o32 = off as u32;
             mine.triangles
                 .extend(o.triangles.into_iter().map(|t| t.map(|i| i + o32)));
+            if !(mine.torn_from.is_empty() && o.torn_from.is_empty()) {
+                mine.torn_from_mut(off).truncate(off);
+                mine.torn_from
+                    .extend(o.torn_from.into_iter().map(|i| i + o32));
+                let n = self.particles.len();
+                mine.torn_from_mut(n);
+            }
         }
         self.self_collision = self.self_collision.or(other.self_collision);
         self.tearing = self.tearing.or(other.tearing);
@@ -507,7 +540,17 @@ impl Scene {
                 *t = t.map(|i| i - lo as u32);
             }
             if !surf.uvs.is_empty() {
-                surf.uvs = surf.uvs[range].to_vec();
+                surf.uvs = surf.uvs[range.clone()].to_vec();
+            }
+            if !surf.torn_from.is_empty() {
+                // A particle torn from one outside the part is its own.
+                surf.torn_from = range
+                    .clone()
+                    .map(|i| match surf.torn_from[i] as usize {
+                        o if inside(o) => (o - lo) as u32,
+                        _ => (i - lo) as u32,
+                    })
+                    .collect();
             }
         }
         s

@@ -103,7 +103,13 @@ impl SelfContactParams {
     }
 }
 
-/// The triangles of a surface with the edges and vertices derived from them.
+/// The triangles of a surface with the edges and vertices derived from them, and where it
+/// was torn.
+///
+/// Features that share a particle are adjacent and never collide. A torn surface records,
+/// for each particle, the particle it was split from (`origin`): the broad phase never culls
+/// a flat patch that reaches a cut (see `tree`), since a cut's two sides can slide over each
+/// other, or the material around its end swing shut, with no stretch.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ContactSurface {
     /// Triangles (particle indices).
@@ -112,11 +118,21 @@ pub struct ContactSurface {
     pub edges: Vec<[u32; 2]>,
     /// Particles on the surface, ascending.
     pub vertices: Vec<u32>,
+    /// For each particle up to the largest surface index, the particle it was torn from
+    /// (itself if never split).
+    pub origin: Vec<u32>,
 }
 
 impl ContactSurface {
-    /// The surface of the given triangles.
+    /// The surface of the given triangles (nothing torn).
     pub fn new(triangles: &[[u32; 3]]) -> Self {
+        Self::torn(triangles, &[])
+    }
+
+    /// The surface of the given triangles, particle `i` split by tearing from `torn_from[i]`
+    /// (missing entries, and entries out of range: not split). Chains (a copy of a copy) are
+    /// followed to their first particle.
+    pub fn torn(triangles: &[[u32; 3]], torn_from: &[u32]) -> Self {
         let mut edges: Vec<[u32; 2]> = triangles
             .iter()
             .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
@@ -127,23 +143,83 @@ impl ContactSurface {
         let mut vertices: Vec<u32> = triangles.iter().flatten().copied().collect();
         vertices.sort_unstable();
         vertices.dedup();
-        Self {
+        let n = vertices.last().map_or(0, |&v| v as usize + 1);
+        let mut s = Self {
             triangles: triangles.to_vec(),
             edges,
             vertices,
+            origin: vec![],
+        };
+        s.set_origins(n, torn_from);
+        s
+    }
+
+    /// Sets `origin` for `n` particles from `torn_from` (see [`ContactSurface::torn`]).
+    fn set_origins(&mut self, n: usize, torn_from: &[u32]) {
+        let of = |i: usize| {
+            torn_from
+                .get(i)
+                .map_or(i, |&o| if (o as usize) < n { o as usize } else { i })
+        };
+        self.origin = (0..n)
+            .map(|i| {
+                // At most n links: a cycle (bad input) stops where it started.
+                let mut o = i;
+                for _ in 0..n {
+                    let next = of(o);
+                    if next == o || next == i {
+                        break;
+                    }
+                    o = next;
+                }
+                o as u32
+            })
+            .collect();
+    }
+
+    /// True when some particle was split from another (the surface was torn).
+    pub fn is_torn(&self) -> bool {
+        self.origin
+            .iter()
+            .enumerate()
+            .any(|(i, &o)| o as usize != i)
+    }
+
+    /// For each particle, whether it lies on a cut: split from another, or split (empty when
+    /// nothing was torn).
+    pub fn on_cut(&self) -> Vec<bool> {
+        if !self.is_torn() {
+            return vec![];
         }
+        let mut on = vec![false; self.origin.len()];
+        for (i, &o) in self.origin.iter().enumerate() {
+            if o as usize != i {
+                on[i] = true;
+                on[o as usize] = true;
+            }
+        }
+        on
     }
 
     /// Several surfaces as one, the particles of surface `k` shifted by `offsets[k]` (the
     /// surfaces of bodies whose particles are laid end to end).
     pub fn concat(parts: &[(&ContactSurface, u32)]) -> Self {
         let mut s = Self::default();
+        let mut torn_from: Vec<u32> = vec![];
         for (p, off) in parts {
             s.triangles
                 .extend(p.triangles.iter().map(|t| t.map(|i| i + off)));
             s.edges.extend(p.edges.iter().map(|e| e.map(|i| i + off)));
             s.vertices.extend(p.vertices.iter().map(|i| i + off));
+            let lo = *off as usize;
+            if torn_from.len() < lo {
+                torn_from.extend(torn_from.len() as u32..lo as u32);
+            }
+            torn_from.truncate(lo);
+            torn_from.extend(p.origin.iter().map(|o| o + off));
         }
+        let n = s.vertices.iter().max().map_or(0, |&v| v as usize + 1);
+        s.set_origins(n, &torn_from);
         s
     }
 
@@ -691,9 +767,9 @@ impl Ctx<'_> {
             s.vcore[i] = core;
             s.vbox[i] = (core.0 - td, core.1 + td);
         }
-        let (tris, edges) = (&self.surf.triangles, &self.surf.edges);
+        let tris = &self.surf.triangles;
         if !s.tree.built_for(tris.len()) {
-            s.tree.build(tris, edges, &s.p0);
+            s.tree.build(self.surf, &s.p0);
         }
         s.tree.load(&self.surf.vertices, &s.p0, &s.p1);
         s.tree.refit(tris, 0.5 * reach + grow);
@@ -708,8 +784,7 @@ impl Ctx<'_> {
     fn walk(&self, s: &mut Scratch, resume: bool) {
         let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
         s.tree.search(
-            &self.surf.triangles,
-            &self.surf.edges,
+            self.surf,
             &s.vbox,
             resume,
             |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),

@@ -30,7 +30,7 @@ use crate::core::driver::Simulation;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
 use crate::core::scene::{Scene, SceneError};
-use crate::math::{Scalar, Vector, VectorExt};
+use crate::math::{Scalar, ToScalar, Vector, VectorExt};
 use serde::{Deserialize, Serialize};
 
 /// The least share of a split particle's mass either side keeps.
@@ -100,6 +100,10 @@ pub struct Torn {
     /// New particles, in order (the first gets index `n`, the particle count before): the
     /// particle each copies, and its mass.
     pub copies: Vec<(u32, f64)>,
+    /// For each split, the original and its copy with the unit direction from each into its
+    /// own side (towards the middle of the triangles it keeps), in order: where
+    /// [`part_copies`] moves them.
+    pub inward: Vec<(u32, Vector)>,
     /// New springs, in order: the spring each copies (its settings) and its ends — the
     /// split-off side's own spring along an edge that lies on the cut.
     pub added: Vec<(usize, [u32; 2])>,
@@ -302,6 +306,22 @@ impl TearMesh {
         mass[v as usize] = m0 * (1.0 - share);
         x.push(xv);
         torn.copies.push((v, m0 * share));
+        // Each side's middle: the mean of its triangles' other corners.
+        let middle = |tris: &[usize]| {
+            let mut sum = Vector::ZERO;
+            for &t in tris {
+                for c in self.triangles[t] {
+                    if c != v {
+                        sum += x[c as usize];
+                    }
+                }
+            }
+            sum / (2 * tris.len()).max(1) as Scalar
+        };
+        torn.inward
+            .push((v, (middle(&near) - xv).normalize_or_zero()));
+        torn.inward
+            .push((new, (middle(&far) - xv).normalize_or_zero()));
         for &t in &far {
             for c in &mut self.triangles[t] {
                 if *c == v {
@@ -353,6 +373,25 @@ impl TearMesh {
         }
         at.push(mine);
         true
+    }
+}
+
+/// Moves each split particle and its copy `gap / 2` into their own sides ([`Torn::inward`]),
+/// for a surface that collides with itself: its contact passes need every pair of features
+/// apart at the start of a pass, and a cut's two sides start coincident (distance zero, no
+/// normal between them). Into its own side, towards the middle of the triangles it keeps,
+/// each stays inside its own fan, so no edge of one side crosses one of the other (parting
+/// them along the broken edge instead can: a triangle is given to a side by its centre, and
+/// its corners may lie across the plane).
+/// Particles for which `held` is true (pinned, or on a prescribed path) are not moved.
+pub fn part_copies(torn: &Torn, x: &mut [Vector], gap: f64, held: impl Fn(usize) -> bool) {
+    for &(i, dir) in &torn.inward {
+        if held(i as usize) {
+            continue;
+        }
+        if let Some(p) = x.get_mut(i as usize) {
+            *p += dir * (0.5 * gap) as Scalar;
+        }
     }
 }
 
@@ -421,11 +460,29 @@ pub fn tear_scene(
             d.particle = new;
             scene.motions.push(d);
         }
-        if let Some(s) = &mut scene.surface
-            && !s.uvs.is_empty()
-        {
-            let uv = s.uvs[parent as usize];
-            s.uvs.push(uv);
+        if let Some(s) = &mut scene.surface {
+            if !s.uvs.is_empty() {
+                let uv = s.uvs[parent as usize];
+                s.uvs.push(uv);
+            }
+            // The copy is torn from what its parent was torn from.
+            let from = s.torn_from_mut(new)[parent as usize];
+            s.torn_from.push(from);
+        }
+    }
+    if let Some(sc) = scene.self_collision
+        && !torn.copies.is_empty()
+    {
+        let mut x: Vec<Vector> = scene
+            .particles
+            .iter()
+            .map(|p| p.position.to_scalar())
+            .collect();
+        let held =
+            |i: usize| scene.particles[i].pinned || scene.motions.iter().any(|m| m.particle == i);
+        part_copies(&torn, &mut x, sc.thickness, held);
+        for (p, x) in scene.particles.iter_mut().zip(&x) {
+            p.position = x.to_f64();
         }
     }
     for (k, [a, b]) in &torn.moved {

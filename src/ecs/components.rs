@@ -179,6 +179,9 @@ pub enum BodyState {
     Running,
     /// [`SoftBody::paused`] is set.
     Paused,
+    /// At rest: its fixed steps cost nothing until something wakes it (see
+    /// [`SoftBodySleep`]).
+    Sleeping,
     /// Left out of stepping because its input is invalid (the message names the culprit).
     Invalid(String),
     /// Stopped by a divergence; the last good state is kept (the message says what happened
@@ -465,6 +468,67 @@ impl From<SoftBodyWind> for crate::core::forces::Wind {
         }
     }
 }
+
+/// When bodies at rest sleep (a resource): once every free particle of a body has stayed
+/// slower than `speed` for `time` under steady forces, its fixed steps, write-back and mesh
+/// updates cost nothing ([`BodyState::Sleeping`]) until something wakes it:
+///
+/// - a collider near it that moves or turns (a [`SoftBodyCollider`] whose transform changed,
+///   an avian body in motion) — in the same fixed step;
+/// - a pin whose target moves, or a particle following a path;
+/// - an edit: a particle's position or velocity set, a spring, tet, pin, force, wind,
+///   material or setting changed, particles or springs added or removed (a mouse grab);
+/// - a change of its force fields, or a field that changes with time
+///   ([`ForceField::steady_from`](crate::core::forces::ForceField::steady_from)), and gusting
+///   wind (a body in a gusting breeze never sleeps);
+/// - contact with another body with [`SelfCollision`] that is awake;
+/// - a [`WakeSoftBody`] message.
+///
+/// A woken body must be still for `time` again before it sleeps, so nothing flickers; while
+/// it sleeps its state does not change, so its own jitter cannot wake it. A body with
+/// [`SoftBodySleepingDisabled`] never sleeps (as avian's `SleepingDisabled`). The core's
+/// rule is [`SleepParams`](crate::core::driver::SleepParams).
+#[derive(Resource, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Resource, Default, Debug)]
+pub struct SoftBodySleep {
+    /// Off: no body sleeps.
+    pub enabled: bool,
+    /// Speed (m/s) every free particle must stay below.
+    pub speed: f32,
+    /// For this long (s).
+    pub time: f32,
+}
+
+impl Default for SoftBodySleep {
+    fn default() -> Self {
+        let p = crate::core::driver::SleepParams::default();
+        Self {
+            enabled: true,
+            speed: p.speed as f32,
+            time: p.time as f32,
+        }
+    }
+}
+
+impl SoftBodySleep {
+    /// The core's settings (`None` when off or when a number is bad).
+    pub fn params(&self) -> Option<crate::core::driver::SleepParams> {
+        let p = crate::core::driver::SleepParams {
+            speed: self.speed as f64,
+            time: self.time as f64,
+        };
+        (self.enabled && p.validate().is_ok()).then_some(p)
+    }
+}
+
+/// On a body root: the body never sleeps.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct SoftBodySleepingDisabled;
+
+/// Wakes a sleeping body (a message): it steps from the next fixed step on.
+#[derive(Message, Clone, Copy, Debug, PartialEq)]
+pub struct WakeSoftBody(pub Entity);
 
 /// Wind for every body without its own [`SoftBodyWind`] (`None`: no wind).
 #[derive(Resource, Reflect, Clone, Copy, Debug, Default, PartialEq)]

@@ -155,6 +155,7 @@ pub(crate) fn spawn_scene(
             this.entity(root).insert(SoftBodySurface {
                 triangles: s.triangles.clone(),
                 uvs: s.uvs.clone(),
+                torn_from: s.torn_from.clone(),
                 ..Default::default()
             });
         }

@@ -24,6 +24,10 @@ pub struct SoftBodySurface {
     pub triangles: Vec<[u32; 3]>,
     /// Texture coordinates, one per particle (empty: none).
     pub uvs: Vec<[f32; 2]>,
+    /// For each particle, the particle it was split from by tearing (itself if never split;
+    /// empty: nothing torn). Kept by the plugin as the surface tears; self-collision counts
+    /// features that meet at a split point as adjacent, as they were before the cut.
+    pub torn_from: Vec<u32>,
     /// Colour of the default material (used when the body has no `MeshMaterial3d`).
     pub color: Color,
 }
@@ -33,6 +37,7 @@ impl Default for SoftBodySurface {
         Self {
             triangles: vec![],
             uvs: vec![],
+            torn_from: vec![],
             color: Color::srgb(0.85, 0.25, 0.22),
         }
     }
@@ -141,27 +146,32 @@ fn sync_skinned(
     materials: Option<ResMut<Assets<StandardMaterial>>>,
     mut bodies: Query<SkinnedItem>,
     mut displays: Query<(&Mesh3d, &mut Visibility), Without<SkinnedSurface>>,
+    mut shown: Local<Drawn>,
 ) {
     let (Some(mut meshes), Some(mut materials)) = (meshes, materials) else {
         return;
     };
+    shown.prune(bodies.iter().len(), |e| bodies.contains(e));
     for (e, skin, bs, display, vis) in &mut bodies {
         let Some(sim) = bs.simulation() else { continue };
         if !sim.state.is_finite() {
             continue;
         }
-        // q: the tet-mesh vertices' current positions (a vertex whose particle is gone stays
-        // at the origin of the map: it no longer moves).
-        let q: Vec<crate::math::Vector> = skin
-            .vertices
-            .iter()
-            .map(|v| {
-                bs.index_of(*v)
-                    .map_or(crate::math::Vector::ZERO, |i| sim.state.x[i])
-            })
-            .collect();
-        let mut positions = vec![[0f32; 3]; skin.skinning.len()];
-        skin.skinning.apply(&q, &mut positions);
+        let skinned = || {
+            // q: the tet-mesh vertices' current positions (a vertex whose particle is gone
+            // stays at the origin of the map: it no longer moves).
+            let q: Vec<crate::math::Vector> = skin
+                .vertices
+                .iter()
+                .map(|v| {
+                    bs.index_of(*v)
+                        .map_or(crate::math::Vector::ZERO, |i| sim.state.x[i])
+                })
+                .collect();
+            let mut positions = vec![[0f32; 3]; skin.skinning.len()];
+            skin.skinning.apply(&q, &mut positions);
+            positions
+        };
         if let Some(mut vis) = vis {
             let want = if skin.show {
                 Visibility::Hidden
@@ -182,12 +192,13 @@ fn sync_skinned(
                 if *dvis != want {
                     *dvis = want;
                 }
-                if !skin.show {
-                    continue;
+                if !skin.show || shown.current(e, bs, false) {
+                    continue; // hidden, or asleep and already shown
                 }
                 let Some(mut mesh) = meshes.get_mut(&m.0) else {
                     continue;
                 };
+                let positions = skinned();
                 if let Some(VertexAttributeValues::Float32x3(p)) =
                     mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
                 {
@@ -201,6 +212,7 @@ fn sync_skinned(
                 }
             }
             None => {
+                let positions = skinned();
                 let n = positions.len();
                 if skin.triangles.iter().flatten().any(|&i| i as usize >= n) {
                     warn!(
@@ -324,6 +336,30 @@ fn drawn_positions(
     }
 }
 
+/// The state version each body's mesh was last updated at (bodies that sleep keep theirs, and
+/// their meshes are left alone).
+#[derive(Default)]
+struct Drawn(bevy::platform::collections::HashMap<Entity, u64>);
+
+impl Drawn {
+    /// True when body `e`'s mesh already shows its state (not interpolating); otherwise
+    /// records that it is about to.
+    fn current(&mut self, e: Entity, bs: &BodySim, interpolating: bool) -> bool {
+        if !interpolating && self.0.get(&e) == Some(&bs.version()) {
+            return true;
+        }
+        self.0.insert(e, bs.version());
+        false
+    }
+
+    /// Forgets despawned bodies now and then.
+    fn prune(&mut self, live: usize, alive: impl Fn(Entity) -> bool) {
+        if self.0.len() > 2 * live + 16 {
+            self.0.retain(|e, _| alive(*e));
+        }
+    }
+}
+
 fn alpha(debug: &SoftBodyDebug, fixed: &Time<Fixed>) -> Option<f32> {
     debug.interpolate.then(|| fixed.overstep_fraction())
 }
@@ -351,9 +387,11 @@ fn sync_surfaces(
     meshes: Option<ResMut<Assets<Mesh>>>,
     materials: Option<ResMut<Assets<StandardMaterial>>>,
     q: Query<SurfaceItem>,
+    mut drawn: Local<Drawn>,
 ) {
     let Some(mut meshes) = meshes else { return };
     let mut materials = materials;
+    drawn.prune(q.iter().len(), |e| q.contains(e));
     for (e, surface, (bs, prev), mesh3d, vertices, has_material) in &q {
         let Some(sim) = bs.simulation() else { continue };
         if bs.awaiting_rebuild() {
@@ -361,6 +399,11 @@ fn sync_surfaces(
         }
         if !sim.state.is_finite() {
             continue;
+        }
+        if let (Some(_), Some(_)) = (mesh3d, vertices)
+            && drawn.current(e, bs, debug.interpolate)
+        {
+            continue; // asleep: the mesh already shows it
         }
         let drawn = drawn_positions(bs, prev, alpha(&debug, &fixed));
         if let (Some(m), Some(vertices)) = (mesh3d, vertices) {
@@ -451,10 +494,11 @@ fn sync_mesh_surfaces(
     meshes: Option<ResMut<Assets<Mesh>>>,
     materials: Option<ResMut<Assets<StandardMaterial>>>,
     mut q: Query<MeshSurfaceItem>,
-    mut scratch: Local<MeshScratch>,
+    (mut scratch, mut shown): (Local<MeshScratch>, Local<Drawn>),
 ) {
     let Some(mut meshes) = meshes else { return };
     let mut materials = materials;
+    shown.prune(q.iter().len(), |e| q.contains(e));
     for (e, mut surface, (bs, prev), mesh3d, has_material) in &mut q {
         let Some(sim) = bs.simulation() else { continue };
         if !sim.state.is_finite() {
@@ -483,6 +527,9 @@ fn sync_mesh_surfaces(
             }
             continue;
         };
+        if shown.current(e, bs, debug.interpolate) {
+            continue; // asleep: the mesh already shows it
+        }
         let Some(mut mesh) = meshes.get_mut(&m.0) else {
             continue;
         };

@@ -254,6 +254,7 @@ pub fn cloth(p: &ClothParams) -> Result<Scene, BuildError> {
     s.surface = Some(Surface {
         triangles: tris,
         uvs,
+        ..Default::default()
     });
     Ok(s)
 }

@@ -183,7 +183,7 @@ pub fn jelly(p: &JellyParams) -> Result<Scene, BuildError> {
     }
     s.surface = Some(Surface {
         triangles: tris,
-        uvs: Vec::new(),
+        ..Default::default()
     });
     s.colliders.push(ground(0.0, p.restitution, p.friction));
     Ok(s)

@@ -355,7 +355,7 @@ pub fn surface_cloth(
             springs,
             surface: Some(Surface {
                 triangles: tris,
-                uvs: vec![],
+                ..Default::default()
             }),
             ..Default::default()
         },

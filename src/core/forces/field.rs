@@ -35,6 +35,14 @@ pub trait ForceField: Send + Sync + std::fmt::Debug {
         let _ = (t, x, v, mass);
         None
     }
+
+    /// True when the field no longer changes with time from `t` on (its force depends on
+    /// position and velocity alone): a body at rest in it may sleep. The default, `false`,
+    /// keeps bodies in the field awake.
+    fn steady_from(&self, t: Scalar) -> bool {
+        let _ = t;
+        false
+    }
 }
 
 /// A field shared by the bodies it acts on.
@@ -105,6 +113,10 @@ impl Buoyancy {
 }
 
 impl ForceField for Buoyancy {
+    fn steady_from(&self, _t: Scalar) -> bool {
+        true
+    }
+
     fn force(&self, _t: Scalar, x: Vector, v: Vector, mass: Scalar) -> Vector {
         let (s, _) = self.fraction(x);
         if s == 0.0 {
@@ -181,6 +193,11 @@ impl RadialBlast {
 }
 
 impl ForceField for RadialBlast {
+    /// Over once its push has ended.
+    fn steady_from(&self, t: Scalar) -> bool {
+        t as f64 >= self.start + self.duration
+    }
+
     fn force(&self, t: Scalar, x: Vector, _v: Vector, mass: Scalar) -> Vector {
         if !self.active(t) {
             return Vector::ZERO;

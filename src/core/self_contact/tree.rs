@@ -35,13 +35,16 @@
 //! contour to cross itself while every normal stays in one hemisphere it would have to curl
 //! around in its own plane, which takes in-plane stretch or compression far beyond what cloth
 //! or a solid's skin undergoes. Patches that are not connected across edges (a median split
-//! can cut a U in two arms) are never culled.
+//! can cut a U in two arms) are never culled, and neither are patches that reach a cut made by
+//! tearing: a slit slides over itself, and the material around a cut's end swings shut, with
+//! every normal in one hemisphere and no stretch at all.
 //!
 //! **Pairs.** Each vertex and each edge is owned by one triangle (the first that holds it);
 //! a pair of triangles with overlapping boxes yields the point–triangle pairs of the vertices
 //! each owns against the other and the edge–edge pairs of the edges they own, so every
 //! feature pair comes from exactly one triangle pair and is found once.
 
+use super::ContactSurface;
 use glam::{DVec3, Mat4, Vec3A, Vec4};
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -328,7 +331,8 @@ struct Node {
     start: u32,
     end: u32,
     child: u32,
-    /// The node's triangles form one piece across shared edges (only those are culled).
+    /// The node's triangles form one piece across shared edges, with no cut inside it (only
+    /// those are culled).
     connected: bool,
 }
 
@@ -381,9 +385,9 @@ impl SurfaceTree {
         self.built_for == triangles && !self.nodes.is_empty()
     }
 
-    /// Builds the hierarchy over `triangles` (with the surface's sorted unique `edges`) at
-    /// positions `x`.
-    pub fn build(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]], x: &[DVec3]) {
+    /// Builds the hierarchy over the surface's triangles at positions `x`.
+    pub fn build(&mut self, surf: &ContactSurface, x: &[DVec3]) {
+        let (triangles, edges) = (&surf.triangles[..], &surf.edges[..]);
         let nt = triangles.len();
         self.built_for = nt;
         self.nodes.clear();
@@ -625,17 +629,20 @@ impl SurfaceTree {
         }
         let mut parent: Vec<u32> = (0..nt as u32).collect();
         let mut stamp = vec![NONE; nt];
+        // A torn surface: the particles on a cut (split, or split from).
+        let on_cut = surf.on_cut();
         for n in 0..self.nodes.len() {
             let node = self.nodes[n];
+            let range = &self.order[node.start as usize..node.end as usize];
             self.nodes[n].connected = connected(
-                &self.order[node.start as usize..node.end as usize],
+                range,
                 &tri_edges,
                 &edge_start,
                 &edge_tris,
                 n as u32,
                 &mut stamp,
                 &mut parent,
-            );
+            ) && !touches_cut(range, &surf.triangles, &on_cut);
         }
 
         self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
@@ -786,13 +793,13 @@ impl SurfaceTree {
     /// those of the paths now): the pairs they hold are added to what the last search found.
     pub fn search(
         &mut self,
-        triangles: &[[u32; 3]],
-        edges: &[[u32; 2]],
+        surf: &ContactSurface,
         vbox: &[Aabb],
         resume: bool,
         mut pt: impl FnMut(u32, u32),
         mut ee: impl FnMut(u32, u32),
     ) {
+        let (triangles, edges) = (&surf.triangles, &surf.edges);
         self.triangle_pairs = 0;
         if self.nodes.is_empty() {
             return;
@@ -818,9 +825,12 @@ impl SurfaceTree {
             }
             let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
             let (tb, ub) = (&tri_box(tt), &tri_box(tu));
-            for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
+            for (own, other, ob) in [(t, u, ub), (u, t, tb)] {
                 for &p in &me.owned_vertices[own as usize] {
-                    if p != NONE && !other_tri.contains(&p) && overlap(&vbox[p as usize], ob) {
+                    if p != NONE
+                        && !triangles[other as usize].contains(&p)
+                        && overlap(&vbox[p as usize], ob)
+                    {
                         pt(p, other);
                     }
                 }
@@ -957,6 +967,20 @@ fn longest_axis(d: DVec3) -> usize {
     }
 }
 
+/// Whether any of the triangles `range` has a corner on a cut (`on_cut`, empty when nothing was
+/// torn). A node that reaches a cut is never culled: the cut's two sides can slide over each
+/// other (a slit, when both lie in the node) or the material on either side of the cut's end
+/// can swing shut around it (a notch) with every normal in one hemisphere and no stretch —
+/// the in-plane curling the normal-cone test assumes cloth cannot do.
+fn touches_cut(range: &[u32], triangles: &[[u32; 3]], on_cut: &[bool]) -> bool {
+    !on_cut.is_empty()
+        && range.iter().any(|&t| {
+            triangles[t as usize]
+                .iter()
+                .any(|&c| on_cut.get(c as usize).copied().unwrap_or(false))
+        })
+}
+
 /// Whether the triangles `range` (of node `node`) are one piece across shared edges: a
 /// union–find over them (`stamp` marks membership, `parent` is scratch).
 #[allow(clippy::too_many_arguments)]
@@ -995,7 +1019,6 @@ fn connected(
 mod tests {
     use super::*;
     use crate::core::forces::wind::unit;
-    use crate::core::self_contact::ContactSurface;
     use std::collections::BTreeSet;
 
     fn rand_unit(seed: &mut u64) -> DVec3 {
@@ -1127,17 +1150,21 @@ mod tests {
 
     /// The tree's pairs for a still surface with vertex boxes grown by `m`.
     fn tree_pairs(tris: &[[u32; 3]], x: &[DVec3], m: f64) -> Pairs {
-        let surf = ContactSurface::new(tris);
+        tree_pairs_torn(tris, &[], x, m)
+    }
+
+    /// [`tree_pairs`] on a torn surface (particle `i` split from `from[i]`).
+    fn tree_pairs_torn(tris: &[[u32; 3]], from: &[u32], x: &[DVec3], m: f64) -> Pairs {
+        let surf = ContactSurface::torn(tris, from);
         let mut tree = SurfaceTree::default();
-        tree.build(tris, &surf.edges, x);
+        tree.build(&surf, x);
         tree.load(&surf.vertices, x, x);
         tree.refit(tris, m);
         let vbox: Vec<Aabb> = x.iter().map(|&p| (p - m, p + m)).collect();
         let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
         let (mut npt, mut nee) = (0, 0);
         tree.search(
-            tris,
-            &surf.edges,
+            &surf,
             &vbox,
             false,
             |p, t| {
@@ -1238,6 +1265,61 @@ mod tests {
             all.1.len()
         );
         assert_eq!(found, all);
+    }
+
+    #[test]
+    fn a_flat_sheet_with_a_slit_keeps_every_near_pair_across_the_cut() {
+        // A flat 24² sheet (2 cm spacing) slit along twelve vertices of its middle row, as a
+        // tear splits them: each gets a copy at its place, which the triangles below the row
+        // take. Then the lower side's edge slides 6 mm over the upper side, 1 mm above it —
+        // every normal still up, no edge stretched past 1.5 times, so without knowing the cut
+        // the patch looks flat and is culled whole. Knowing it, every pair nearer than the
+        // margins (exact distances, apart from the tree) is among the candidates.
+        let (n, h, m) = (24, 0.02, 0.004);
+        let (mut tris, mut x) = folded_grid(n, h, 1.0, 0.0);
+        let mut from: Vec<u32> = (0..x.len() as u32).collect();
+        let row = 12;
+        for i in 6..18 {
+            let v = (row * n + i) as u32;
+            let copy = x.len() as u32;
+            x.push(x[v as usize]);
+            from.push(v);
+            for t in tris.iter_mut() {
+                let below = t.iter().map(|&c| x[c as usize].z).sum::<f64>() / 3.0 < row as f64 * h;
+                if below && t.contains(&v) {
+                    *t = t.map(|c| if c == v { copy } else { c });
+                }
+            }
+        }
+        for p in &mut x[n * n..] {
+            *p += DVec3::new(0.0, 0.001, 0.3 * h);
+        }
+        let near = brute_pairs(&tris, &x, m, Some(2.0 * m));
+        assert!(near.0.len() > 20, "the sides overlap: {}", near.0.len());
+        let plain = tree_pairs(&tris, &x, m);
+        assert!(
+            !near.0.is_subset(&plain.0),
+            "without the cut the slit is culled: the rule matters on this sheet"
+        );
+        let found = tree_pairs_torn(&tris, &from, &x, m);
+        assert!(
+            near.0.is_subset(&found.0),
+            "{:?}",
+            near.0.difference(&found.0).next()
+        );
+        assert!(
+            near.1.is_subset(&found.1),
+            "{:?}",
+            near.1.difference(&found.1).next()
+        );
+        // Chains (a copy of a copy) lead to the first particle; an index out of range leaves a
+        // particle its own, and a cycle (bad input) ends without looping.
+        let surf = ContactSurface::torn(&[[0, 1, 2], [3, 4, 5]], &[0, 1, 2, 0, 3, 9]);
+        assert_eq!(surf.origin, vec![0, 1, 2, 0, 0, 5]);
+        assert_eq!(surf.on_cut(), vec![true, false, false, true, true, false]);
+        let cycle = ContactSurface::torn(&[[0, 1, 2]], &[1, 0, 2]);
+        assert_eq!(cycle.origin, vec![1, 0, 2]);
+        assert!(ContactSurface::new(&tris).on_cut().is_empty());
     }
 
     #[test]

@@ -187,6 +187,10 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SelfCollision>()
             .register_type::<Tearable>()
             .add_message::<SoftBodyTorn>()
+            .register_type::<SoftBodySleep>()
+            .init_resource::<SoftBodySleep>()
+            .register_type::<SoftBodySleepingDisabled>()
+            .add_message::<WakeSoftBody>()
             .register_type::<GlobalWind>()
             .register_type::<SoftBodyForceFields>()
             .register_type::<GlobalForceFields>()
@@ -261,6 +265,11 @@ pub struct BodySim {
     diverged: Option<Divergence>,
     report: bool,
     frame_dt: f64,
+    /// Slept through the last fixed step: its state did not change.
+    idle: bool,
+    /// Counts the fixed steps that wrote a changed state (a drawn mesh made at one count
+    /// needs no update until it moves on).
+    version: u64,
 }
 
 impl BodySim {
@@ -294,6 +303,17 @@ impl BodySim {
     /// The packed index of a particle entity of this body.
     pub fn index_of(&self, particle: Entity) -> Option<usize> {
         self.index.get(&particle).map(|i| *i as usize)
+    }
+
+    /// Slept through the last fixed step (its state did not change).
+    pub fn is_idle(&self) -> bool {
+        self.idle
+    }
+
+    /// How many fixed steps have written a changed state: what is drawn at one count needs no
+    /// update while the count stays.
+    pub fn version(&self) -> u64 {
+        self.version
     }
 }
 

@@ -22,8 +22,9 @@ struct FemInput<'a, 'w, 's> {
     tets: &'a Query<'w, 's, Ref<'static, Tet>>,
     material: Option<NeoHookean>,
     solver: SolverChoice,
-    /// Self-collision and the surface's triangles (empty: the tets' boundary).
-    self_collision: Option<(SelfCollision, Vec<[u32; 3]>)>,
+    /// Self-collision, the surface's triangles (empty: the tets' boundary) and which particles
+    /// were torn from which.
+    self_collision: Option<(SelfCollision, Vec<[u32; 3]>, Vec<u32>)>,
     /// Tearing (checked here, applied after each step).
     tearable: Option<Tearable>,
 }
@@ -170,9 +171,10 @@ fn build_body(
     {
         return Err(format!("soft body {body_e}: Tearable {field} {message}"));
     }
-    if let Some((sc, triangles)) = fem.self_collision {
+    if let Some((sc, triangles, torn_from)) = fem.self_collision {
         layout.self_collision = Some(sc.params());
         layout.surface = triangles;
+        layout.torn_from = torn_from;
     }
     let (model, state) = layout.build().map_err(|errs| {
         // The first problem, named by the entity behind the packed index.
@@ -231,7 +233,12 @@ fn build_body(
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 pub(crate) fn prepare(
     fixed: Res<Time<Fixed>>,
-    (global_wind, global_fields): (Res<GlobalWind>, Res<GlobalForceFields>),
+    (global_wind, global_fields, sleep, mut wakes): (
+        Res<GlobalWind>,
+        Res<GlobalForceFields>,
+        Res<SoftBodySleep>,
+        MessageReader<WakeSoftBody>,
+    ),
     mut bodies: Query<(
         Entity,
         Ref<SoftBody>,
@@ -248,6 +255,7 @@ pub(crate) fn prepare(
             Option<Ref<SelfCollision>>,
             Option<Mut<SoftBodySurface>>,
             Option<Ref<Tearable>>,
+            Has<SoftBodySleepingDisabled>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -286,6 +294,8 @@ pub(crate) fn prepare(
     edited.sort_unstable();
     edited.dedup();
     let no_list: &[Entity] = &[];
+    let mut woken: Vec<Entity> = wakes.read().map(|w| w.0).collect();
+    woken.sort_unstable();
     for (
         body_e,
         body,
@@ -294,7 +304,7 @@ pub(crate) fn prepare(
         plist,
         slist,
         wind,
-        (tlist, material, solver, fields, self_collision, mut surface, tearable),
+        (tlist, material, solver, fields, self_collision, mut surface, tearable, no_sleep),
     ) in &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
@@ -330,6 +340,7 @@ pub(crate) fn prepare(
         if !dirty && let Some(sim) = bs.sim.as_mut() {
             // Per particle: pins, forces and masses changed → rebuild; position or velocity
             // edited (not by our writeback) → teleport.
+            let mut teleported = false;
             let masses = sim.system.mass();
             for (i, &e) in bs.particles.iter().enumerate() {
                 let Ok((p, _, _)) = particles.get(e) else {
@@ -350,10 +361,14 @@ pub(crate) fn prepare(
                         sim.state.x[i] = p.position.to_scalar();
                         sim.state.v[i] = p.velocity.to_scalar();
                         bs.written[i] = (p.position, p.velocity);
+                        teleported = true;
                     } else {
                         warn!("particle {e}: non-finite position or velocity ignored (kept {wx})");
                     }
                 }
+            }
+            if teleported {
+                sim.wake();
             }
         }
         if dirty
@@ -377,8 +392,12 @@ pub(crate) fn prepare(
                 tets: &tets,
                 material: material.map(|m| m.0),
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
-                self_collision: self_collision
-                    .map(|c| (*c, surface.map_or(vec![], |s| s.triangles.clone()))),
+                self_collision: self_collision.map(|c| {
+                    let (tris, from) = surface.map_or((vec![], vec![]), |s| {
+                        (s.triangles.clone(), s.torn_from.clone())
+                    });
+                    (*c, tris, from)
+                }),
                 tearable: tearable.map(|t| *t),
             };
             match build_body(
@@ -437,6 +456,15 @@ pub(crate) fn prepare(
                     .all(|(a, b)| std::sync::Arc::ptr_eq(a, b))
             {
                 sim.system.fields = own.iter().chain(&global_fields.0).cloned().collect();
+                sim.wake();
+            }
+            // Sleeping: the settings as they are now; a wake asked for by message.
+            let want = if no_sleep { None } else { sleep.params() };
+            if sim.sleep() != want {
+                sim.set_sleep(want);
+            }
+            if woken.binary_search(&body_e).is_ok() {
+                sim.wake();
             }
         }
     }
@@ -479,10 +507,24 @@ fn follow_removed_particles(
         }
         uvs
     });
+    // Torn from a particle that is gone: its own.
+    let torn_from = (surf.torn_from.len() == old.len()).then(|| {
+        let mut from: Vec<u32> = (0..new.len() as u32).collect();
+        for (i, m) in map.iter().enumerate() {
+            let o = map.get(surf.torn_from[i] as usize).copied().flatten();
+            if let (Some(j), Some(o)) = (m, o) {
+                from[*j as usize] = o;
+            }
+        }
+        from
+    });
     let surf = &mut **surf;
     surf.triangles = tris;
     if let Some(uvs) = uvs {
         surf.uvs = uvs;
+    }
+    if let Some(from) = torn_from {
+        surf.torn_from = from;
     }
     commands
         .entity(body_e)

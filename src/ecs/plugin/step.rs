@@ -47,6 +47,7 @@ pub(super) fn step(
         .par_iter_mut()
         .for_each(|(entity, body, mut bs, mut status)| {
             let bs = &mut *bs;
+            bs.idle = false;
             let Some(sim) = bs.sim.as_mut() else { return };
             if bs.diverged.is_some() {
                 return;
@@ -63,7 +64,9 @@ pub(super) fn step(
             }
             let before = sim.stats();
             let contact_before = sim.system.self_contact.as_ref().map(|c| c.total);
+            let was_asleep = sim.is_asleep();
             let result = pool.advance(sim);
+            bs.idle = was_asleep && sim.is_asleep();
             let after = sim.stats();
             if let (Some(b), Some(a)) = (
                 contact_before,
@@ -93,7 +96,11 @@ pub(super) fn step(
                     for (i, _, _, at) in &bs.follow {
                         sim.state.x[*i as usize] = at.to_scalar();
                     }
-                    status.state = BodyState::Running;
+                    status.state = if sim.is_asleep() {
+                        BodyState::Sleeping
+                    } else {
+                        BodyState::Running
+                    };
                     status.substeps = rep.substeps;
                 }
                 Err(d) => {
@@ -133,9 +140,11 @@ pub(super) fn writeback(
         }
         let Some(sim) = bs.sim.as_ref() else { continue };
         // The driver restores the last good state on divergence; never write anything else.
-        if !sim.state.is_finite() {
+        // A body that slept through the step has nothing new.
+        if !sim.state.is_finite() || bs.idle {
             continue;
         }
+        bs.version += 1;
         for (i, &e) in bs.particles.iter().enumerate() {
             let Ok((mut p, tf)) = particles.get_mut(e) else {
                 continue;
@@ -210,6 +219,29 @@ pub(super) fn contact_between(
     }
     let mut used = vec![false; cache.len()];
     for group in groups {
+        // Bodies that all slept through the step did not move: nothing to resolve. An awake
+        // body touching sleeping ones wakes them (they take part as they lie).
+        if group.iter().all(|&k| all[k].2.idle) {
+            if let Some(slot) = cache.iter().position(|g| {
+                g.key()
+                    .chunks(2)
+                    .map(|c| c[0])
+                    .eq(group.iter().map(|&k| all[k].0.to_bits()))
+            }) {
+                used[slot] = true;
+            }
+            continue;
+        }
+        for &k in &group {
+            let bs = &mut *all[k].2;
+            if bs.idle {
+                bs.idle = false;
+                if let Some(sim) = bs.sim.as_mut() {
+                    sim.wake();
+                }
+                all[k].3.state = BodyState::Running;
+            }
+        }
         let key: Vec<u64> = group
             .iter()
             .flat_map(|&k| [all[k].0.to_bits(), all[k].3.rebuilds as u64])
@@ -308,7 +340,7 @@ pub(super) fn tear(
     mut torn_msgs: MessageWriter<SoftBodyTorn>,
     mut commands: Commands,
 ) {
-    use crate::core::tear::{TearMesh, by_strain, overstretched};
+    use crate::core::tear::{TearMesh, by_strain, overstretched, part_copies};
     for (body_e, tearable, mut bs, surface, mesh_surface) in &mut bodies {
         let bs = &mut *bs;
         let params = tearable.params();
@@ -316,10 +348,10 @@ pub(super) fn tear(
             continue;
         }
         let Some(sim) = bs.sim.as_ref() else { continue };
-        let self_colliding = sim.system.self_contact.is_some();
         if !sim.state.is_finite() {
             continue;
         }
+        let thickness = sim.system.self_contact.as_ref().map(|c| c.params.thickness);
         let packed = sim.system.springs.as_slice();
         let over = overstretched(
             packed.iter().map(|s| ([s.i, s.j], s.rest)),
@@ -336,13 +368,33 @@ pub(super) fn tear(
         let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
         let torn = mesh.tear(&by_strain(&over), &sim.state.x, &mut mass);
         let n = bs.particles.len();
+        // Positions after the tear: copies where their originals are, and with self-collision
+        // each side of a cut moved half the thickness into its own side.
+        let mut x = sim.state.x.clone();
+        for &(p, _) in &torn.copies {
+            let xp = x[p as usize];
+            x.push(xp);
+        }
+        if let Some(gap) = thickness {
+            // Pinned particles (and their copies, which keep the pin) stay where they are.
+            let held = |i: usize| {
+                let mut root = i;
+                while root >= n {
+                    root = torn.copies[root - n].0 as usize;
+                }
+                particles
+                    .get(bs.particles[root])
+                    .is_ok_and(|(_, pin)| pin.is_some())
+            };
+            part_copies(&torn, &mut x, gap, held);
+        }
         // The particle each index copies, back to one the model has.
         let mut origin: Vec<usize> = (0..n).collect();
         let mut entity = bs.particles.clone();
         let mut split = Vec::with_capacity(torn.copies.len());
-        for &(parent, m) in &torn.copies {
+        for (k, &(parent, m)) in torn.copies.iter().enumerate() {
             let root = origin[parent as usize];
-            let (x, v) = (sim.state.x[root].to_f32(), sim.state.v[root].to_f32());
+            let (x, v) = (x[n + k].to_f32(), sim.state.v[root].to_f32());
             let pin = particles
                 .get(entity[parent as usize])
                 .ok()
@@ -364,10 +416,14 @@ pub(super) fn tear(
             entity.push(copy);
         }
         for (i, &e) in bs.particles.iter().enumerate() {
-            if let Ok((mut p, _)) = particles.get_mut(e)
-                && (mass[i] as f32) != p.mass
-            {
-                p.mass = mass[i] as f32;
+            if let Ok((mut p, _)) = particles.get_mut(e) {
+                if (mass[i] as f32) != p.mass {
+                    p.mass = mass[i] as f32;
+                }
+                let xi = x[i].to_f32();
+                if xi != p.position {
+                    p.position = xi;
+                }
             }
         }
         for &(k, [a, b]) in &torn.moved {
@@ -410,14 +466,17 @@ pub(super) fn tear(
                     surf.uvs.push(uv);
                 }
             }
+            // Each copy is torn from what its parent was torn from.
+            surf.torn_from.truncate(n);
+            let from = surf.torn_from.len() as u32;
+            surf.torn_from.extend(from..n as u32);
+            for &(parent, _) in &torn.copies {
+                let root = surf.torn_from[parent as usize];
+                surf.torn_from.push(root);
+            }
             commands
                 .entity(body_e)
                 .remove::<crate::render::SurfaceVertices>();
-        }
-        if self_colliding && !torn.copies.is_empty() {
-            warn_once!(
-                "soft body {body_e}: Tearable with SelfCollision: the two sides of a cut start where the particle was split, and the contact pass may not separate them (then the body is held, with SoftBodyStatus::contact_failed)"
-            );
         }
         if mesh_surface && !torn.copies.is_empty() {
             warn_once!(

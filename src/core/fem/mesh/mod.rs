@@ -321,7 +321,7 @@ impl TetMesh {
             material: Some(material),
             surface: Some(Surface {
                 triangles: self.boundary(),
-                uvs: vec![],
+                ..Default::default()
             }),
             ..Default::default()
         }
