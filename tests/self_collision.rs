@@ -649,44 +649,8 @@ mod plugin {
             friction: 0.25,
         });
         let mut scene = cloth_pile(&p).unwrap();
-        f32_exact(&mut scene);
+        common::f32_exact(&mut scene);
         (scene, p.stable_step())
-    }
-
-    /// Every number of the scene rounded to `f32`, which the plugin's components hold: the
-    /// core then starts from the same values in either precision.
-    fn f32_exact(s: &mut Scene) {
-        let r = |x: &mut f64| *x = *x as f32 as f64;
-        for p in &mut s.particles {
-            p.position.iter_mut().chain(&mut p.velocity).for_each(r);
-            r(&mut p.mass);
-        }
-        // Rest lengths explicit (the plugin's springs carry them as f32).
-        let rest: Vec<f64> = (0..s.springs.len()).map(|k| s.rest_length(k)).collect();
-        for (sp, l) in s.springs.iter_mut().zip(rest) {
-            r(&mut sp.stiffness);
-            r(&mut sp.damping);
-            sp.rest_length = Some(l as f32 as f64);
-        }
-        s.gravity.iter_mut().for_each(r);
-        r(&mut s.drag);
-        for c in &mut s.colliders {
-            if let ShapeDesc::Sphere { radius } = &mut c.shape {
-                r(radius);
-            }
-            if let Motion::Fixed { position } = &mut c.motion {
-                position.iter_mut().for_each(r);
-            }
-            let m = &mut c.material;
-            for x in [
-                &mut m.friction,
-                &mut m.restitution,
-                &mut m.thickness,
-                &mut m.bounce_threshold,
-            ] {
-                r(x);
-            }
-        }
     }
 
     fn body(h: f64) -> SoftBody {

@@ -45,8 +45,12 @@ fn config() -> DriverConfig {
     }
 }
 
+/// The flag with its numbers rounded to `f32` (what the plugin's components hold), so the core
+/// and the plugin start from the same values in either precision.
 fn core_flag() -> Simulation<ParticleState, ParticleModel> {
-    let (model, state) = flag([0.0, 1.0, 0.0]).build().unwrap();
+    let mut scene = flag([0.0, 1.0, 0.0]);
+    common::f32_exact(&mut scene);
+    let (model, state) = scene.build().unwrap();
     Simulation::new(model, state, config())
 }
 
@@ -253,7 +257,9 @@ mod plugin {
         // Same flag, same settings: the plugin's body falls asleep on the same frame as the
         // core driver with the default sleep settings, and lies in the same bits.
         let mut app = common::headless_app(FRAME);
-        let e = spawn(&mut app, &flag([0.0, 1.0, 0.0]), body());
+        let mut scene = flag([0.0, 1.0, 0.0]);
+        common::f32_exact(&mut scene);
+        let e = spawn(&mut app, &scene, body());
         let mut sim = core_flag();
         sim.set_sleep(Some(SleepParams::default()));
         for f in 0..300 {
