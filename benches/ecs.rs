@@ -48,16 +48,8 @@ fn bench(c: &mut Criterion) {
             b.iter(|| core.advance_frame().unwrap())
         });
 
-        let mut app = App::new();
         // One kernel thread, as the core driver above runs (outside any thread pool).
-        app.add_plugins((
-            MinimalPlugins,
-            TransformPlugin,
-            SoftBodyPlugin::default().with_kernel_threads(1),
-        ))
-        .insert_resource(Time::<Fixed>::from_duration(frame))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1))
-        .insert_resource(awake());
+        let mut app = one_thread_app(frame, false);
         let sc = scene.clone();
         let body = SoftBody {
             integrator: kind,
@@ -99,15 +91,7 @@ fn broad_phase(c: &mut Criterion) {
     let mut g = c.benchmark_group("broad_phase_64x64");
     g.sample_size(20);
     for colliders in [0usize, 200] {
-        let mut app = App::new();
-        app.add_plugins((
-            MinimalPlugins,
-            TransformPlugin,
-            SoftBodyPlugin::default().with_kernel_threads(1),
-        ))
-        .insert_resource(Time::<Fixed>::from_duration(frame))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1))
-        .insert_resource(awake());
+        let mut app = one_thread_app(frame, false);
         let sc = scene.clone();
         app.world_mut()
             .run_system_once(move |mut cmd: Commands| {
@@ -136,12 +120,23 @@ fn broad_phase(c: &mut Criterion) {
     g.finish();
 }
 
-/// Sleeping off: every body steps.
-fn awake() -> SoftBodySleep {
-    SoftBodySleep {
-        enabled: false,
+/// A headless App stepping one fixed frame of `frame` per `update`, the force kernels on one
+/// thread, with sleeping on or off (off: every body steps, so a cloth coming to rest during a
+/// measurement does not stop).
+fn one_thread_app(frame: Duration, sleeping: bool) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        SoftBodyPlugin::default().with_kernel_threads(1),
+    ))
+    .insert_resource(Time::<Fixed>::from_duration(frame))
+    .insert_resource(TimeUpdateStrategy::FixedTimesteps(1))
+    .insert_resource(SoftBodySleep {
+        enabled: sleeping,
         ..Default::default()
-    }
+    });
+    app
 }
 
 /// 50 hanging 10×10 flags (the sleeping tests' flag: 0.5 m, top edge pinned, symplectic Euler
@@ -153,18 +148,7 @@ fn sleeping(c: &mut Criterion) {
     let mut g = c.benchmark_group("sleeping_50_flags");
     g.sample_size(20);
     for on in [false, true] {
-        let mut app = App::new();
-        app.add_plugins((
-            MinimalPlugins,
-            TransformPlugin,
-            SoftBodyPlugin::default().with_kernel_threads(1),
-        ))
-        .insert_resource(Time::<Fixed>::from_duration(frame))
-        .insert_resource(TimeUpdateStrategy::FixedTimesteps(1))
-        .insert_resource(SoftBodySleep {
-            enabled: on,
-            ..Default::default()
-        });
+        let mut app = one_thread_app(frame, on);
         app.world_mut()
             .run_system_once(move |mut cmd: Commands| {
                 for k in 0..50 {

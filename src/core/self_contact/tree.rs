@@ -1181,6 +1181,16 @@ mod tests {
         (pt, ee)
     }
 
+    /// Every pair of `near` is among the `found` ones (names the first that is not).
+    fn assert_covers(found: &Pairs, near: &Pairs) {
+        let missing_pt = near.0.difference(&found.0).next();
+        let missing_ee = near.1.difference(&found.1).next();
+        assert!(
+            missing_pt.is_none() && missing_ee.is_none(),
+            "missed: {missing_pt:?} {missing_ee:?}"
+        );
+    }
+
     thread_local! {
         /// Triangle pairs the last `tree_pairs` compared.
         static TESTED: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
@@ -1302,16 +1312,7 @@ mod tests {
             "without the cut the slit is culled: the rule matters on this sheet"
         );
         let found = tree_pairs_torn(&tris, &from, &x, m);
-        assert!(
-            near.0.is_subset(&found.0),
-            "{:?}",
-            near.0.difference(&found.0).next()
-        );
-        assert!(
-            near.1.is_subset(&found.1),
-            "{:?}",
-            near.1.difference(&found.1).next()
-        );
+        assert_covers(&found, &near);
         // Chains (a copy of a copy) lead to the first particle; an index out of range leaves a
         // particle its own, and a cycle (bad input) ends without looping.
         let surf = ContactSurface::torn(&[[0, 1, 2], [3, 4, 5]], &[0, 1, 2, 0, 3, 9]);
@@ -1337,16 +1338,7 @@ mod tests {
         let near = brute_pairs(&tris, &x, m, Some(2.0 * m));
         let all = brute_pairs(&tris, &x, m, None);
         assert!(near.0.len() > 200, "the layers are near: {}", near.0.len());
-        assert!(
-            near.0.is_subset(&found.0),
-            "{:?}",
-            near.0.difference(&found.0).next()
-        );
-        assert!(
-            near.1.is_subset(&found.1),
-            "{:?}",
-            near.1.difference(&found.1).next()
-        );
+        assert_covers(&found, &near);
         assert!(found.0.is_subset(&all.0) && found.1.is_subset(&all.1));
         // Flat parts cost little: of the 560,000 triangle pairs, those compared are a few
         // per triangle of the two layers.
