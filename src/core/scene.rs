@@ -112,8 +112,8 @@ pub struct Surface {
     #[serde(default)]
     pub uvs: Vec<[f32; 2]>,
     /// For each particle, the particle it was split from by tearing (itself if never split;
-    /// empty: nothing torn). Self-collision counts features that meet at a split point as
-    /// adjacent, as they were before the cut ([`ContactSurface`](crate::core::self_contact::ContactSurface)).
+    /// empty: nothing torn). Self-collision's broad phase never culls a patch that reaches a
+    /// cut ([`ContactSurface`](crate::core::self_contact::ContactSurface)).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub torn_from: Vec<u32>,
 }

@@ -784,7 +784,8 @@ impl Ctx<'_> {
     fn walk(&self, s: &mut Scratch, resume: bool) {
         let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
         s.tree.search(
-            self.surf,
+            &self.surf.triangles,
+            &self.surf.edges,
             &s.vbox,
             resume,
             |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),

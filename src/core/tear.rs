@@ -376,6 +376,19 @@ impl TearMesh {
     }
 }
 
+/// Extends a surface's record of which particle each was torn from (`torn_from`; empty:
+/// nothing torn yet) over its `n` particles before a tear and the tear's `copies` after them,
+/// each copy torn from what its parent was torn from.
+pub fn record_copies(torn_from: &mut Vec<u32>, n: usize, copies: &[(u32, f64)]) {
+    torn_from.truncate(n);
+    let from = torn_from.len() as u32;
+    torn_from.extend(from..n as u32);
+    for &(parent, _) in copies {
+        let root = torn_from[parent as usize];
+        torn_from.push(root);
+    }
+}
+
 /// Moves each split particle and its copy `gap / 2` into their own sides ([`Torn::inward`]),
 /// for a surface that collides with itself: its contact passes need every pair of features
 /// apart at the start of a pass, and a cut's two sides start coincident (distance zero, no
@@ -445,6 +458,7 @@ pub fn tear_scene(
         p.velocity = sim.state.v[i].to_f64();
         p.mass = mass[i];
     }
+    let n_before = scene.particles.len();
     for &(parent, m) in &torn.copies {
         let mut q = scene.particles[parent as usize].clone();
         q.mass = m;
@@ -460,15 +474,15 @@ pub fn tear_scene(
             d.particle = new;
             scene.motions.push(d);
         }
-        if let Some(s) = &mut scene.surface {
-            if !s.uvs.is_empty() {
-                let uv = s.uvs[parent as usize];
-                s.uvs.push(uv);
-            }
-            // The copy is torn from what its parent was torn from.
-            let from = s.torn_from_mut(new)[parent as usize];
-            s.torn_from.push(from);
+        if let Some(s) = &mut scene.surface
+            && !s.uvs.is_empty()
+        {
+            let uv = s.uvs[parent as usize];
+            s.uvs.push(uv);
         }
+    }
+    if let Some(s) = &mut scene.surface {
+        record_copies(&mut s.torn_from, n_before, &torn.copies);
     }
     if let Some(sc) = scene.self_collision
         && !torn.copies.is_empty()

@@ -25,8 +25,8 @@ pub struct SoftBodySurface {
     /// Texture coordinates, one per particle (empty: none).
     pub uvs: Vec<[f32; 2]>,
     /// For each particle, the particle it was split from by tearing (itself if never split;
-    /// empty: nothing torn). Kept by the plugin as the surface tears; self-collision counts
-    /// features that meet at a split point as adjacent, as they were before the cut.
+    /// empty: nothing torn). Kept by the plugin as the surface tears; self-collision's broad
+    /// phase never culls a patch that reaches a cut.
     pub torn_from: Vec<u32>,
     /// Colour of the default material (used when the body has no `MeshMaterial3d`).
     pub color: Color,

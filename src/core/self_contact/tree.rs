@@ -642,7 +642,7 @@ impl SurfaceTree {
                 n as u32,
                 &mut stamp,
                 &mut parent,
-            ) && !touches_cut(range, &surf.triangles, &on_cut);
+            ) && !touches_cut(range, triangles, &on_cut);
         }
 
         self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
@@ -793,13 +793,13 @@ impl SurfaceTree {
     /// those of the paths now): the pairs they hold are added to what the last search found.
     pub fn search(
         &mut self,
-        surf: &ContactSurface,
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
         vbox: &[Aabb],
         resume: bool,
         mut pt: impl FnMut(u32, u32),
         mut ee: impl FnMut(u32, u32),
     ) {
-        let (triangles, edges) = (&surf.triangles, &surf.edges);
         self.triangle_pairs = 0;
         if self.nodes.is_empty() {
             return;
@@ -825,12 +825,9 @@ impl SurfaceTree {
             }
             let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
             let (tb, ub) = (&tri_box(tt), &tri_box(tu));
-            for (own, other, ob) in [(t, u, ub), (u, t, tb)] {
+            for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
                 for &p in &me.owned_vertices[own as usize] {
-                    if p != NONE
-                        && !triangles[other as usize].contains(&p)
-                        && overlap(&vbox[p as usize], ob)
-                    {
+                    if p != NONE && !other_tri.contains(&p) && overlap(&vbox[p as usize], ob) {
                         pt(p, other);
                     }
                 }
@@ -1164,7 +1161,8 @@ mod tests {
         let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
         let (mut npt, mut nee) = (0, 0);
         tree.search(
-            &surf,
+            tris,
+            &surf.edges,
             &vbox,
             false,
             |p, t| {

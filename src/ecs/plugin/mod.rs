@@ -305,11 +305,6 @@ impl BodySim {
         self.index.get(&particle).map(|i| *i as usize)
     }
 
-    /// Slept through the last fixed step (its state did not change).
-    pub fn is_idle(&self) -> bool {
-        self.idle
-    }
-
     /// How many fixed steps have written a changed state: what is drawn at one count needs no
     /// update while the count stays.
     pub fn version(&self) -> u64 {

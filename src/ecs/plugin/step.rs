@@ -219,15 +219,16 @@ pub(super) fn contact_between(
     }
     let mut used = vec![false; cache.len()];
     for group in groups {
-        // Bodies that all slept through the step did not move: nothing to resolve. An awake
-        // body touching sleeping ones wakes them (they take part as they lie).
+        let key: Vec<u64> = group
+            .iter()
+            .flat_map(|&k| [all[k].0.to_bits(), all[k].3.rebuilds as u64])
+            .collect();
+        let cached = cache.iter().position(|g| g.key() == key.as_slice());
+        // Bodies that all slept through the step did not move: nothing to resolve (their
+        // handler is kept). An awake body touching sleeping ones wakes them (they take part
+        // as they lie).
         if group.iter().all(|&k| all[k].2.idle) {
-            if let Some(slot) = cache.iter().position(|g| {
-                g.key()
-                    .chunks(2)
-                    .map(|c| c[0])
-                    .eq(group.iter().map(|&k| all[k].0.to_bits()))
-            }) {
+            if let Some(slot) = cached {
                 used[slot] = true;
             }
             continue;
@@ -242,11 +243,7 @@ pub(super) fn contact_between(
                 all[k].3.state = BodyState::Running;
             }
         }
-        let key: Vec<u64> = group
-            .iter()
-            .flat_map(|&k| [all[k].0.to_bits(), all[k].3.rebuilds as u64])
-            .collect();
-        let slot = match cache.iter().position(|g| g.key() == key.as_slice()) {
+        let slot = match cached {
             Some(i) => i,
             None => {
                 cache.push(ContactGroup::default());
@@ -466,14 +463,7 @@ pub(super) fn tear(
                     surf.uvs.push(uv);
                 }
             }
-            // Each copy is torn from what its parent was torn from.
-            surf.torn_from.truncate(n);
-            let from = surf.torn_from.len() as u32;
-            surf.torn_from.extend(from..n as u32);
-            for &(parent, _) in &torn.copies {
-                let root = surf.torn_from[parent as usize];
-                surf.torn_from.push(root);
-            }
+            crate::core::tear::record_copies(&mut surf.torn_from, n, &torn.copies);
             commands
                 .entity(body_e)
                 .remove::<crate::render::SurfaceVertices>();
