@@ -7,6 +7,7 @@
 //! cargo run --release --example cloth_pile -- --bench     # headless: cost of a step, table
 //! cargo run --release --example cloth_pile -- --bodies    # the pile as three bodies only
 //! cargo run --release --example cloth_pile -- --bench --only 64   # the 64² rows only (or 32)
+//! cargo run --release --example cloth_pile -- --detail 3  # drawn 3× finer (SurfaceDetail)
 //! ```
 //!
 //! The three cloths are one body (`Scene::append`), so their surfaces collide with each other
@@ -49,6 +50,7 @@ fn main() {
     let p = ClothPileParams::default();
     let scene = cloth_pile(&p).expect("valid pile");
     let body = args.body(IntegratorKind::SymplecticEuler, p.stable_step());
+    let detail = args.detail.map(SurfaceDetail::level);
     let mut app = common::app("cloth pile", &args);
     app.add_systems(Startup, move |mut commands: Commands| {
         let e = commands
@@ -58,6 +60,9 @@ fn main() {
             color: Color::srgb(0.25, 0.45, 0.85),
             ..surface(&scene)
         });
+        if let Some(d) = detail {
+            commands.entity(e).insert(d);
+        }
         common::stage_with(
             &mut commands,
             common::OrbitCamera {

@@ -6,6 +6,7 @@
 //! ```text
 //! cargo run --release --example tearing
 //! cargo run --release --example tearing -- --bench     # headless: what a tear costs
+//! cargo run --release --example tearing -- --detail 3  # drawn 3× finer (SurfaceDetail)
 //! ```
 //!
 //! Keys: Space pause, N step, R reset (mend and start again), G wireframe; left drag pulls the
@@ -82,6 +83,7 @@ fn main() {
     let args = common::args("tearing");
     let scene = curtain();
     let body = args.body(IntegratorKind::SymplecticEuler, H);
+    let detail = args.detail.map(SurfaceDetail::level);
     let mut app = common::app("tearing", &args);
     app.add_systems(Startup, move |mut commands: Commands| {
         let e = commands
@@ -94,6 +96,9 @@ fn main() {
             color: Color::srgb(0.80, 0.30, 0.25),
             ..Default::default()
         });
+        if let Some(d) = detail {
+            commands.entity(e).insert(d);
+        }
         common::stage_with(
             &mut commands,
             common::OrbitCamera {

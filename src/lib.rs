@@ -90,7 +90,7 @@ pub mod prelude {
     #[cfg(feature = "plugin")]
     pub use crate::render::{
         SkinnedSurface, SoftBodyDebug, SoftBodyDebugPlugin, SoftBodyDebugRender, SoftBodyGizmos,
-        SoftBodyRenderPlugin, SoftBodySurface,
+        SoftBodyRenderPlugin, SoftBodySurface, SurfaceDetail,
     };
     #[cfg(feature = "egui")]
     pub use crate::ui::{SoftBodyUi, SoftBodyUiPlugin};

@@ -350,6 +350,166 @@ fn despawning_springs_and_particles_mid_run_keeps_the_body_stepping() {
     assert!(particles_of(&app, e).iter().all(|x| x.is_finite()));
 }
 
+/// The body's mesh: positions, normals, texture coordinates and triangles.
+type MeshData = (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<[f32; 2]>, Vec<u32>);
+
+fn mesh_of(app: &App, body: Entity) -> MeshData {
+    use bevy::mesh::{Indices, VertexAttributeValues as V};
+    let handle = &app.world().get::<Mesh3d>(body).expect("a mesh").0;
+    let mesh = app.world().resource::<Assets<Mesh>>().get(handle).unwrap();
+    let f3 = |a| match mesh.attribute(a) {
+        Some(V::Float32x3(v)) => v.clone(),
+        _ => vec![],
+    };
+    let uv = match mesh.attribute(Mesh::ATTRIBUTE_UV_0) {
+        Some(V::Float32x2(v)) => v.clone(),
+        _ => vec![],
+    };
+    let idx = match mesh.indices() {
+        Some(Indices::U32(i)) => i.clone(),
+        _ => vec![],
+    };
+    (
+        f3(Mesh::ATTRIBUTE_POSITION),
+        f3(Mesh::ATTRIBUTE_NORMAL),
+        uv,
+        idx,
+    )
+}
+
+#[test]
+fn a_surface_detail_draws_a_finer_mesh_that_the_particles_carry() {
+    use bevy_soft_body::core::detail::{Rounding, Tessellation};
+    use bevy_soft_body::render::SurfaceDetail;
+    let mut app = app();
+    app.add_plugins(bevy::asset::AssetPlugin::default())
+        .init_asset::<Mesh>();
+    // A lying cloth held at its four corners sags into a bowl (a hanging one would stay in
+    // its plane, where rounding has nothing to do).
+    let scene = build::cloth(&build::ClothParams {
+        pins: build::ClothPins::FourCorners,
+        hanging: false,
+        ..Default::default()
+    })
+    .unwrap();
+    let surface = scene.surface.clone().unwrap();
+    let n = scene.particles.len();
+    let e = spawn(&mut app, &scene, SoftBody::default());
+    app.world_mut()
+        .entity_mut(e)
+        .insert(SurfaceDetail::level(3));
+    // The mesh the core's tessellation makes of the particles where they are (the plugin
+    // draws the last step exactly: interpolation is off).
+    let expected = |app: &App, level: u32| {
+        let xs = particles_of(app, e);
+        let fine = Tessellation::new(&surface.triangles, n, level).unwrap();
+        let mut y = vec![[0.0; 3]; fine.len()];
+        fine.apply(&xs, Rounding::default(), &mut y);
+        (y, fine)
+    };
+    for frames in [60, 5] {
+        for _ in 0..frames {
+            app.update();
+        }
+        let (pos, nrm, uv, idx) = mesh_of(&app, e);
+        let (y, fine) = expected(&app, 3);
+        // 16² cloth, level 3: a 46² grid (3 · 15 + 1 a side).
+        assert_eq!(pos.len(), 46 * 46);
+        assert_eq!(
+            pos, y,
+            "the mesh follows the particles through the tessellation"
+        );
+        for (p, x) in pos.iter().zip(particles_of(&app, e)) {
+            assert_eq!(Vec3::from_array(*p), x, "coarse vertices are the particles");
+        }
+        assert_eq!(uv, fine.interpolate(&surface.uvs));
+        assert_eq!(
+            idx,
+            fine.triangles()
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<Vec<_>>()
+        );
+        let mut shade = vec![[0.0; 3]; fine.len()];
+        fine.shade(&fine.coarse_normals(&particles_of(&app, e)), &mut shade);
+        assert_eq!(nrm, shade);
+        assert!(
+            nrm.iter()
+                .all(|n| (Vec3::from_array(*n).length() - 1.0).abs() < 1e-5)
+        );
+        // The display does leave the flat triangles.
+        let flat = fine.skin().zip(&pos).map(|((c, w), p)| {
+            let x = particles_of(&app, e);
+            let q = x[c[0] as usize] * w[0] + x[c[1] as usize] * w[1] + x[c[2] as usize] * w[2];
+            q.distance(Vec3::from_array(*p))
+        });
+        let lift = flat.fold(0.0, f32::max);
+        assert!(lift > 1e-4, "{lift}");
+    }
+    // Another level remakes the mesh; removing the detail draws the particles again.
+    app.world_mut()
+        .entity_mut(e)
+        .insert(SurfaceDetail::level(2));
+    app.update();
+    assert_eq!(mesh_of(&app, e).0, expected(&app, 2).0);
+    app.world_mut().entity_mut(e).remove::<SurfaceDetail>();
+    app.update();
+    let plain: Vec<[f32; 3]> = particles_of(&app, e).iter().map(|p| p.to_array()).collect();
+    assert_eq!(mesh_of(&app, e).0, plain);
+    // Settings that cannot be used: drawn as simulated (and a warning names the body).
+    app.world_mut().entity_mut(e).insert(SurfaceDetail {
+        roundness: f32::NAN,
+        ..Default::default()
+    });
+    app.update();
+    assert_eq!(mesh_of(&app, e).0.len(), n);
+    // Beyond `far` from the camera: drawn as simulated; back within 0.9 × far: fine again.
+    app.world_mut().entity_mut(e).insert(SurfaceDetail {
+        far: Some(5.0),
+        ..SurfaceDetail::level(3)
+    });
+    let cam = app
+        .world_mut()
+        .spawn((Camera3d::default(), Transform::from_xyz(0.0, 0.5, 3.0)))
+        .id();
+    app.update();
+    assert_eq!(mesh_of(&app, e).0.len(), 46 * 46, "near: fine");
+    app.world_mut()
+        .entity_mut(cam)
+        .insert(Transform::from_xyz(0.0, 0.5, 20.0));
+    app.update();
+    app.update();
+    assert_eq!(mesh_of(&app, e).0.len(), n, "far: as simulated");
+    // Just inside `far` is not enough to switch back (hysteresis), well inside is.
+    let d = |app: &App| {
+        let x = particles_of(app, e);
+        let (lo, hi) = x
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), p| {
+                (l.min(*p), h.max(*p))
+            });
+        ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+    };
+    let (c, r) = d(&app);
+    app.world_mut()
+        .entity_mut(cam)
+        .insert(Transform::from_translation(c + Vec3::Z * (r + 4.8)));
+    app.update();
+    app.update();
+    assert_eq!(
+        mesh_of(&app, e).0.len(),
+        n,
+        "within the hysteresis band: unchanged"
+    );
+    app.world_mut()
+        .entity_mut(cam)
+        .insert(Transform::from_translation(c + Vec3::Z * (r + 4.0)));
+    app.update();
+    app.update();
+    assert_eq!(mesh_of(&app, e).0.len(), 46 * 46, "near again: fine");
+}
+
 #[test]
 fn mesh_vertices_are_the_particles_and_normals_are_unit() {
     let mut app = app();

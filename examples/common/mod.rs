@@ -13,7 +13,7 @@ use bevy::prelude::*;
 use bevy::render::view::screenshot::{Screenshot, save_to_disk};
 use bevy_soft_body::prelude::*;
 
-/// Command line: `[LETTER [H]] [--size N] [--screenshot FILE] [--frames N]`.
+/// Command line: `[LETTER [H]] [--size N] [--detail L] [--screenshot FILE] [--frames N]`.
 pub struct Args {
     /// Integrator, when given.
     pub integrator: Option<IntegratorKind>,
@@ -21,6 +21,8 @@ pub struct Args {
     pub h: Option<f64>,
     /// Cloth resolution, when given (3 to 256).
     pub size: Option<usize>,
+    /// Level of detail to draw cloth surfaces at (`SurfaceDetail`), when given.
+    pub detail: Option<u32>,
     screenshot: Option<String>,
     frames: u32,
 }
@@ -31,13 +33,14 @@ pub fn args(usage: &str) -> Args {
         integrator: None,
         h: None,
         size: None,
+        detail: None,
         screenshot: None,
         frames: 150,
     };
     let mut it = std::env::args().skip(1);
     let fail = |e: String| -> ! {
         eprintln!(
-            "error: {e}\nusage: {usage} [LETTER [H]] [--size N] [--screenshot FILE [--frames N]]"
+            "error: {e}\nusage: {usage} [LETTER [H]] [--size N] [--detail L] [--screenshot FILE [--frames N]]"
         );
         std::process::exit(1)
     };
@@ -58,6 +61,16 @@ pub fn args(usage: &str) -> Args {
                     fail(format!("--size must be between 3 and 256, got {n}"));
                 }
                 a.size = Some(n);
+            }
+            "--detail" => {
+                let l = it
+                    .next()
+                    .and_then(|s| s.parse().ok())
+                    .unwrap_or_else(|| fail("--detail needs a level".into()));
+                if let Err(why) = SurfaceDetail::level(l).validate() {
+                    fail(format!("--detail: {why}"));
+                }
+                a.detail = Some(l);
             }
             "--frames" => {
                 a.frames = it

@@ -5,6 +5,7 @@
 pub mod body_contact;
 pub mod build;
 pub mod collide;
+pub mod detail;
 pub mod driver;
 pub mod fem;
 pub mod forces;
