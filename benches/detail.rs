@@ -83,11 +83,7 @@ fn detail(c: &mut Criterion) {
             let (mut p, mut nrm) = (vec![[0.0; 3]; fine.len()], vec![[0.0; 3]; fine.len()]);
             println!("24² at level 4: {} display vertices", fine.len());
             g.bench_function("draw 24² at level 4 (93² display)", |b| {
-                b.iter(|| {
-                    let cn = fine.coarse_normals(black_box(&x));
-                    fine.apply_with_normals(&x, &cn, Rounding::default(), &mut p);
-                    fine.shade(&cn, &mut nrm);
-                })
+                b.iter(|| fine.draw(black_box(&x), Rounding::default(), &mut p, &mut nrm))
             });
         }
     }

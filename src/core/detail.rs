@@ -245,6 +245,20 @@ impl Tessellation {
         self.apply_with_normals(x, &self.coarse_normals(x), rounding, out);
     }
 
+    /// What a renderer needs each frame: fine positions from the coarse ones (`x`) and their
+    /// shading normals, both from one computation of the coarse normals.
+    pub fn draw(
+        &self,
+        x: &[Vec3],
+        rounding: Rounding,
+        positions: &mut [[f32; 3]],
+        normals: &mut [[f32; 3]],
+    ) {
+        let coarse = self.coarse_normals(x);
+        self.apply_with_normals(x, &coarse, rounding, positions);
+        self.shade(&coarse, normals);
+    }
+
     /// The coarse surface's area-weighted unit vertex normals at positions `x`.
     pub fn coarse_normals(&self, x: &[Vec3]) -> Vec<Vec3> {
         let mut normals = vec![Vec3::ZERO; x.len()];

@@ -553,14 +553,17 @@ fn sync_surfaces(
                         }
                     }
                     d.bound();
-                    let normals = d.tessellation.coarse_normals(&d.coarse);
+                    // Both attributes at once: taken out of the mesh and put back.
+                    let mut positions = std::mem::take(p);
+                    let mut normals = match mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL) {
+                        Some(VertexAttributeValues::Float32x3(n)) => std::mem::take(n),
+                        _ => vec![],
+                    };
+                    normals.resize(positions.len(), [0.0; 3]);
                     d.tessellation
-                        .apply_with_normals(&d.coarse, &normals, d.rounding, p);
-                    if let Some(VertexAttributeValues::Float32x3(nrm)) =
-                        mesh.attribute_mut(Mesh::ATTRIBUTE_NORMAL)
-                    {
-                        d.tessellation.shade(&normals, nrm);
-                    }
+                        .draw(&d.coarse, d.rounding, &mut positions, &mut normals);
+                    mesh.insert_attribute(Mesh::ATTRIBUTE_POSITION, positions);
+                    mesh.insert_attribute(Mesh::ATTRIBUTE_NORMAL, normals);
                     continue;
                 }
                 None => {
@@ -607,9 +610,7 @@ fn sync_surfaces(
                 };
                 let mut positions = vec![[0.0; 3]; tessellation.len()];
                 let mut normals = vec![[0.0; 3]; tessellation.len()];
-                let coarse_normals = tessellation.coarse_normals(&drawn);
-                tessellation.apply_with_normals(&drawn, &coarse_normals, rounding, &mut positions);
-                tessellation.shade(&coarse_normals, &mut normals);
+                tessellation.draw(&drawn, rounding, &mut positions, &mut normals);
                 let uvs = (surface.uvs.len() == n).then(|| tessellation.interpolate(&surface.uvs));
                 let triangles = tessellation.triangles().to_vec();
                 let mut state = Detailed {
