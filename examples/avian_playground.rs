@@ -7,10 +7,10 @@
 //! `-- --bench [FRAMES]`: headless, prints ms per fixed frame for the coupled scene, the soft
 //! bodies alone and the rigid bodies alone (the table in docs/BENCHMARKS.md).
 //!
-//! The jelly floats in a pool (a `Buoyancy` force field), and X sets off a `RadialBlast` in
+//! The jelly floats in a pool (a `Buoyancy` force field), and F sets off a `RadialBlast` in
 //! front of the curtain.
 //!
-//! Keys: O throws a ball at the curtain, C drops a crate on the trampoline, X blast, Space pause, N step,
+//! Keys: O throws a ball at the curtain, C drops a crate on the trampoline, F blast, Space pause, N step,
 //! G wireframe; left drag pulls cloth, right drag or arrows orbit, wheel zoom. The "coupling"
 //! panel lists what the soft bodies gave each rigid body in the last frame and the momenta.
 
@@ -459,7 +459,7 @@ fn bench(frames: usize) {
     }
 }
 
-/// O: a ball at the curtain; C: a crate over the trampoline; X: a blast in front of the
+/// O: a ball at the curtain; C: a crate over the trampoline; F: a blast in front of the
 /// curtain (the panel's integrator keys keep their letters).
 fn keys(
     input: Res<ButtonInput<KeyCode>>,
@@ -486,7 +486,7 @@ fn keys(
             MeshMaterial3d(materials.add(Color::srgb(0.9, 0.35, 0.2))),
         ));
     }
-    if input.just_pressed(KeyCode::KeyX) {
+    if input.just_pressed(KeyCode::KeyF) {
         // A blast of 0.15 s, 0.4 m in front of the curtain: every soft body near it is pushed
         // (the field acts on all bodies; far away its push is nil).
         fields.0 = vec![std::sync::Arc::new(RadialBlast {

@@ -21,7 +21,7 @@
 //! i linearly implicit Euler, d trapezoid with implicit damping, b backward Euler (Newton).
 //!
 //! Keys (the `SoftBodyUiPlugin` panel shows them too): Space pause/resume, N single step,
-//! R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B switch integrator (K = RK4). Mouse: left
+//! R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P switch integrator (K = RK4). Mouse: left
 //! drag pulls the nearest particle, right drag or arrows orbit, wheel or Up/Down zoom.
 //!
 //! `--screenshot FILE [--frames N]` renders N frames of exactly 1/60 s each (default 150: the

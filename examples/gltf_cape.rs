@@ -5,7 +5,7 @@
 //! file made it (its material, vertex colours and UVs), deformed. Linearly implicit Euler at
 //! one step per 1/60 s frame by default (`-- LETTER H` picks another).
 //!
-//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B integrator;
+//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator;
 //! left drag pulls the cape, right drag or arrows orbit, wheel zoom.
 
 #[path = "common/mod.rs"]

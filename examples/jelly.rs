@@ -4,7 +4,7 @@
 //! default; `cargo run --release --example jelly -- b 0.0167` uses Newton backward Euler,
 //! one step per frame.
 //!
-//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B integrator
+//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator
 //! (K = RK4); left drag pulls the jelly, right drag or arrows orbit, wheel zoom.
 
 #[path = "common/mod.rs"]

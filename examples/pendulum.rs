@@ -3,7 +3,7 @@
 //! default: `cargo run --release --example pendulum -- r 0.004` takes the sample solution's
 //! letter and step.
 //!
-//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B integrator
+//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator
 //! (K = RK4); left drag pulls a particle, right drag or arrows orbit, wheel zoom.
 
 #[path = "common/mod.rs"]

@@ -4,7 +4,7 @@
 //! `cargo run --release --example pyramid -- i 0.0167` drops it with linearly implicit Euler,
 //! one step per frame.
 //!
-//! Keys: Space pause, N step, R reset, G wireframe, E/S/T/M/K/A/I/D/B integrator (K = RK4);
+//! Keys: Space pause, N step, R reset, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator (K = RK4);
 //! left drag pulls a particle, right drag or arrows orbit, wheel zoom.
 
 #[path = "common/mod.rs"]

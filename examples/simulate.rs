@@ -13,7 +13,7 @@
 //! last good frame is kept on disk, and the exit status is 2.
 //!
 //! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly|cloth_pile`,
-//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b` (or a name), `--h STEP` (default
+//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b|x|p` (or a name), `--h STEP` (default
 //! 1 ms; for adaptive RK45 it is the largest step, and defaults to the frame length, so the
 //! error control alone chooses), `--cfl NUMBER`,
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),

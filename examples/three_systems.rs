@@ -4,7 +4,7 @@
 //! first-order system stepped by the core directly (it has no particles). One integrator
 //! letter and step size for all: `cargo run --release --example three_systems -- r 0.0025`.
 //!
-//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B integrator for
+//! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator for
 //! the bodies, E/S/T/M/K/A for the circle (K = RK4); left drag pulls a particle, right drag
 //! or arrows orbit, wheel zoom.
 

@@ -5,7 +5,7 @@
 //! in the slides; `cargo run --release --example wire -- d 0.01` runs the implicit-damping
 //! trapezoid at a fixed step 20× larger.
 //!
-//! Keys: Space pause, N step, R reset, G wireframe, E/S/T/M/K/A/I/D/B integrator (K = RK4);
+//! Keys: Space pause, N step, R reset, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator (K = RK4);
 //! left drag pulls a particle, right drag or arrows orbit, wheel zoom.
 
 #[path = "common/mod.rs"]

@@ -7,7 +7,7 @@ use plotters::style::RGBColor;
 use std::path::PathBuf;
 
 /// One colour per integrator, in `IntegratorKind::ALL` order (colour-blind-safe set).
-pub const PALETTE: [RGBColor; 9] = [
+pub const PALETTE: [RGBColor; 11] = [
     RGBColor(228, 26, 28),
     RGBColor(55, 126, 184),
     RGBColor(77, 175, 74),
@@ -17,6 +17,8 @@ pub const PALETTE: [RGBColor; 9] = [
     RGBColor(247, 129, 191),
     RGBColor(80, 80, 80),
     RGBColor(23, 190, 207),
+    RGBColor(188, 189, 34),
+    RGBColor(0, 0, 140),
 ];
 
 /// `[--quick] [--out DIR] [--sizes A,B,C]`.

@@ -231,6 +231,24 @@ pub trait Linearization: Sync {
         x: &mut [Vector],
         grad: Option<&mut [Vector]>,
     ) -> f64;
+    /// The springs as constraints, for the position-based and projective methods (XPBD,
+    /// projective dynamics): `None` when the system has forces those methods cannot express
+    /// as constraints here (finite elements).
+    fn constraint_springs(&self) -> Option<&crate::core::forces::Springs> {
+        None
+    }
+    /// Adds the applied forces into `f` at `(t, state)`: gravity as `m g` on free particles,
+    /// the wind's push `c w(t)`, external forces and force fields — every force except the
+    /// springs, the elements and the drag linear in velocity
+    /// ([`Linearization::drag_coefficient`]).
+    fn applied_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]) {
+        let _ = (t, state, f);
+    }
+    /// The coefficient `c` of the drag `−c v` on every free particle (drag plus the wind's
+    /// drag coefficient).
+    fn drag_coefficient(&self) -> Scalar {
+        0.0
+    }
     /// Holds particles resting on or pressed into colliders for the coming implicit step
     /// (their `mask` set to 0 and velocity to the collider's): contact as a constraint of the
     /// solve. The default holds none.
@@ -337,6 +355,18 @@ impl Linearization for ParticleModel {
         if !self.tets.is_empty() {
             self.tets.accumulate_f64(&state.x, f);
         }
+        self.applied_forces(t, state, f);
+    }
+
+    fn constraint_springs(&self) -> Option<&crate::core::forces::Springs> {
+        self.tets.is_empty().then_some(&self.springs)
+    }
+
+    fn drag_coefficient(&self) -> Scalar {
+        self.linear_drag()
+    }
+
+    fn applied_forces(&self, t: Scalar, state: &ParticleState, f: &mut [Vector]) {
         let wc = self.wind_coefficient();
         let push = if wc > 0.0 {
             self.wind_velocity(t) * wc

@@ -10,9 +10,10 @@
 //! highlight the springs attached to it).
 //!
 //! Keys: Space pause/resume, N single step while paused, R reset, W wind on/off, G wireframe,
-//! E/S/T/M/K/A/I/D/B integrator (forward Euler, symplectic Euler, trapezoid, midpoint, RK4,
-//! RK45, linearly implicit Euler, implicit-damping trapezoid, backward Euler). Mouse: left
-//! button (by default) drags the particle nearest the cursor ray with a spring.
+//! E/S/T/M/K/A/I/D/B/X/P integrator (forward Euler, symplectic Euler, trapezoid, midpoint, RK4,
+//! RK45, linearly implicit Euler, implicit-damping trapezoid, backward Euler, XPBD, projective
+//! dynamics). Mouse: left button (by default) drags the particle nearest the cursor ray with a
+//! spring.
 
 use crate::core::driver::StepPolicy;
 use crate::core::integrate::IntegratorKind;
@@ -100,7 +101,7 @@ impl Default for SoftBodyUi {
     }
 }
 
-const LETTERS: [(KeyCode, IntegratorKind); 9] = [
+const LETTERS: [(KeyCode, IntegratorKind); 11] = [
     (KeyCode::KeyE, IntegratorKind::ForwardEuler),
     (KeyCode::KeyS, IntegratorKind::SymplecticEuler),
     (KeyCode::KeyT, IntegratorKind::Trapezoid),
@@ -110,6 +111,8 @@ const LETTERS: [(KeyCode, IntegratorKind); 9] = [
     (KeyCode::KeyI, IntegratorKind::LinearlyImplicitEuler),
     (KeyCode::KeyD, IntegratorKind::ImplicitDampingTrapezoid),
     (KeyCode::KeyB, IntegratorKind::BackwardEuler),
+    (KeyCode::KeyX, IntegratorKind::Xpbd),
+    (KeyCode::KeyP, IntegratorKind::ProjectiveDynamics),
 ];
 
 /// Whether egui is using the keyboard (`keyboard`) or the pointer: an app's own controls
@@ -554,7 +557,7 @@ fn panel(
                     });
                 }
             }
-            ui.small("Space pause · N step · R reset · W wind · G wireframe · E S T M K A I D B method · mouse: drag particles, right-drag orbit, wheel zoom");
+            ui.small("Space pause · N step · R reset · W wind · G wireframe · E S T M K A I D B X P method · mouse: drag particles, right-drag orbit, wheel zoom");
         });
     Ok(())
 }

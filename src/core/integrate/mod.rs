@@ -17,10 +17,12 @@ macro_rules! counters {
 mod adaptive;
 mod explicit;
 mod implicit;
+mod position;
 
 pub use adaptive::{AdaptiveConfig, DormandPrince};
 pub use explicit::{ForwardEuler, Midpoint, Rk4, SymplecticEuler, Trapezoid};
 pub use implicit::{BackwardEuler, ImplicitDampingTrapezoid, LinearlyImplicitEuler, NewtonReport};
+pub use position::{ProjectiveDynamics, Xpbd};
 
 use crate::core::ode::{OdeState, OdeSystem};
 use crate::core::solve::LinearSolver;
@@ -53,6 +55,12 @@ pub enum IntegratorKind {
     ImplicitDampingTrapezoid,
     /// `b`: backward Euler as minimization, Newton with a backtracking line search.
     BackwardEuler,
+    /// `x`: XPBD with small steps (Macklin et al. 2016, 2019): springs as compliant
+    /// constraints, one Gauss–Seidel sweep per step.
+    Xpbd,
+    /// `p`: projective dynamics (Bouaziz et al. 2014): backward Euler by local/global
+    /// iterations with a prefactored sparse Cholesky.
+    ProjectiveDynamics,
 }
 
 /// Number of explicit kinds in [`IntegratorKind::ALL`].
@@ -70,7 +78,7 @@ const N_EXPLICIT: usize = {
 
 impl IntegratorKind {
     /// Every kind, in the order charts and tables list them.
-    pub const ALL: [IntegratorKind; 9] = [
+    pub const ALL: [IntegratorKind; 11] = [
         IntegratorKind::ForwardEuler,
         IntegratorKind::SymplecticEuler,
         IntegratorKind::Trapezoid,
@@ -80,6 +88,8 @@ impl IntegratorKind {
         IntegratorKind::LinearlyImplicitEuler,
         IntegratorKind::ImplicitDampingTrapezoid,
         IntegratorKind::BackwardEuler,
+        IntegratorKind::Xpbd,
+        IntegratorKind::ProjectiveDynamics,
     ];
 
     /// The explicit kinds (those that work on any [`OdeSystem`]): [`IntegratorKind::ALL`]
@@ -97,7 +107,7 @@ impl IntegratorKind {
         out
     };
 
-    /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`).
+    /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`, `i`, `d`, `b`, `x`, `p`).
     pub fn letter(self) -> char {
         match self {
             Self::ForwardEuler => 'e',
@@ -109,6 +119,8 @@ impl IntegratorKind {
             Self::LinearlyImplicitEuler => 'i',
             Self::ImplicitDampingTrapezoid => 'd',
             Self::BackwardEuler => 'b',
+            Self::Xpbd => 'x',
+            Self::ProjectiveDynamics => 'p',
         }
     }
 
@@ -124,6 +136,8 @@ impl IntegratorKind {
             Self::LinearlyImplicitEuler => "linearly_implicit_euler",
             Self::ImplicitDampingTrapezoid => "implicit_damping_trapezoid",
             Self::BackwardEuler => "backward_euler",
+            Self::Xpbd => "xpbd",
+            Self::ProjectiveDynamics => "projective_dynamics",
         }
     }
 
@@ -139,6 +153,8 @@ impl IntegratorKind {
             Self::LinearlyImplicitEuler => "linearly implicit Euler",
             Self::ImplicitDampingTrapezoid => "trapezoid with implicit damping",
             Self::BackwardEuler => "backward Euler (Newton)",
+            Self::Xpbd => "XPBD (small steps)",
+            Self::ProjectiveDynamics => "projective dynamics",
         }
     }
 
@@ -150,7 +166,9 @@ impl IntegratorKind {
             | Self::SymplecticEuler
             | Self::LinearlyImplicitEuler
             | Self::ImplicitDampingTrapezoid
-            | Self::BackwardEuler => 1,
+            | Self::BackwardEuler
+            | Self::Xpbd
+            | Self::ProjectiveDynamics => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 5,
@@ -158,14 +176,17 @@ impl IntegratorKind {
     }
 
     /// Derivative evaluations per (accepted, fixed) step (for backward Euler, per Newton
-    /// iteration without line-search backtracking).
+    /// iteration without line-search backtracking; for XPBD and projective dynamics, per
+    /// sweep over the constraints).
     pub fn stages(self) -> u32 {
         match self {
             Self::ForwardEuler
             | Self::SymplecticEuler
             | Self::LinearlyImplicitEuler
             | Self::ImplicitDampingTrapezoid
-            | Self::BackwardEuler => 1,
+            | Self::BackwardEuler
+            | Self::Xpbd
+            | Self::ProjectiveDynamics => 1,
             Self::Trapezoid | Self::Midpoint => 2,
             Self::Rk4 => 4,
             Self::Rk45 => 6,
@@ -177,12 +198,25 @@ impl IntegratorKind {
         matches!(self, Self::Rk45)
     }
 
-    /// True for methods that solve linear systems with the system's Jacobians.
+    /// True for methods that treat the elastic forces implicitly: they have no explicit
+    /// stability bound and need a particle model's structure (its Jacobians, or its springs
+    /// as constraints), so they do not apply to arbitrary [`OdeSystem`]s.
     pub const fn is_implicit(self) -> bool {
         matches!(
             self,
-            Self::LinearlyImplicitEuler | Self::ImplicitDampingTrapezoid | Self::BackwardEuler
+            Self::LinearlyImplicitEuler
+                | Self::ImplicitDampingTrapezoid
+                | Self::BackwardEuler
+                | Self::Xpbd
+                | Self::ProjectiveDynamics
         )
+    }
+
+    /// True for methods that step finite elements (tets) as well as springs. XPBD and
+    /// projective dynamics work on springs only here: the crate's neo-Hookean elements have
+    /// no constraint (or projection) form in them.
+    pub const fn supports_elements(self) -> bool {
+        !matches!(self, Self::Xpbd | Self::ProjectiveDynamics)
     }
 
     /// Builds the integrator for states of type `S` and systems of type `Sys` (implicit
@@ -227,6 +261,8 @@ impl IntegratorKind {
             Self::LinearlyImplicitEuler => Box::new(LinearlyImplicitEuler::default()),
             Self::ImplicitDampingTrapezoid => Box::new(ImplicitDampingTrapezoid::default()),
             Self::BackwardEuler => Box::new(BackwardEuler::default()),
+            Self::Xpbd => Box::new(Xpbd::default()),
+            Self::ProjectiveDynamics => Box::new(ProjectiveDynamics::default()),
         }
     }
 }
@@ -292,6 +328,8 @@ impl FromStr for IntegratorKind {
                 Self::ImplicitDampingTrapezoid
             }
             "b" | "backward_euler" | "implicit_euler" | "newton" => Self::BackwardEuler,
+            "x" | "xpbd" | "pbd" | "position_based" => Self::Xpbd,
+            "p" | "pd" | "projective" | "projective_dynamics" => Self::ProjectiveDynamics,
             _ => return Err(UnknownIntegrator(s.to_string())),
         };
         Ok(k)
@@ -312,6 +350,8 @@ pub enum StepError {
     NeedsSecondOrder(IntegratorKind),
     /// The method needs the system's force Jacobians, which this system does not provide.
     NeedsJacobians(IntegratorKind),
+    /// The method works on springs only and the system has finite elements.
+    NeedsSprings(IntegratorKind),
     /// The linear solve failed: the system matrix is not positive definite on the free
     /// degrees of freedom (a free particle without mass, a negative stiffness) or a value was
     /// not finite. The state is unchanged.
@@ -338,6 +378,11 @@ impl fmt::Display for StepError {
             Self::NeedsJacobians(k) => {
                 write!(f, "{} needs a system with force Jacobians", k.label())
             }
+            Self::NeedsSprings(k) => write!(
+                f,
+                "{} works on springs only: finite elements have no constraint form here; pick another method for this body",
+                k.label()
+            ),
             Self::SolverFailed(k) => write!(
                 f,
                 "{}: the linear solve failed (matrix not positive definite on the free particles, or not finite); check for free particles without mass and negative stiffness",
