@@ -139,7 +139,7 @@ where
     let mut c = ChartBuilder::on(&root)
         .caption(
             format!(
-                "largest stable h·ω_max ({PRECISION}); bars: undamped theory; i, b: stable up to 1/60 s"
+                "largest stable h·ω_max ({PRECISION}); bars: undamped theory; implicit methods (i d b x p) tried up to h = 1/60 s"
             ),
             ("sans-serif", 18),
         )
@@ -158,7 +158,7 @@ where
                 .get(i)
                 .map_or(String::new(), |k| k.letter().to_string())
         })
-        .x_desc("method (e s t m r i d b)")
+        .x_desc("method (e s t m r i d b x p)")
         .y_desc("h · ω_max")
         .draw()?;
     let colors = [

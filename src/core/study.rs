@@ -230,7 +230,11 @@ pub fn work_precision(problem: Problem, kinds: &[IntegratorKind], quick: bool) -
             // times larger (at most 4×, which keeps RK4 on the pendulum at h ω < 1.3, well in
             // its asymptotic range) so more of it lies above the floor; for the cloth, whose
             // stiffest mode bounds every explicit step, keep the common sweep.
+            // XPBD on the cloth starts one halving lower: its single constraint sweep is not yet
+            // in its asymptotic range at the common sweep's largest step (the error falls 3.6×
+            // over that first halving, then 2.1×, measured in f64).
             let scale = match problem {
+                Problem::Cloth if kind == IntegratorKind::Xpbd => 0.5,
                 Problem::Cloth => 1.0,
                 _ => f64::powi(2.0, kind.order() as i32 - 1).min(4.0),
             };

@@ -434,6 +434,7 @@ impl ProjectiveDynamics {
 
     /// The incremental potential `g(x)` of the module docs at the current iterate (springs'
     /// and dampers' terms at their exact minimum over the projections).
+    #[allow(clippy::needless_range_loop)] // one index over parallel arrays
     fn objective(&self, h: f64, c: f64, mass: &[Scalar], springs: &Springs) -> f64 {
         let mut g = 0.0;
         for i in 0..self.x.len() {
