@@ -78,6 +78,7 @@ fn hanging(k: f64, m: f64) -> (ParticleModel, ParticleState) {
     .unwrap()
 }
 
+/// A simulation of `model` by `kind` at fixed step `h` in 1/60 s frames, `frames` of them run.
 fn simulate(
     model: ParticleModel,
     state: ParticleState,
@@ -256,16 +257,7 @@ fn cloth_run(kind: IntegratorKind, h: f64) -> Option<(f64, f64, f64, f64)> {
         .unwrap()
         .build()
         .unwrap();
-    let mut sim = Simulation::new(
-        model.clone(),
-        state,
-        DriverConfig {
-            integrator: kind,
-            policy: StepPolicy::Fixed { h },
-            frame_dt: 1.0 / 60.0,
-            ..Default::default()
-        },
-    );
+    let mut sim = simulate(model.clone(), state, kind, h, 0);
     let e0 = model.energy(0.0, &sim.state).unwrap().total() as f64;
     let mut highest = f64::NEG_INFINITY;
     for _ in 0..300 {

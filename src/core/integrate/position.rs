@@ -42,13 +42,11 @@ use super::{Integrator, IntegratorKind, IntegratorStats, StepError, check_h};
 use crate::core::forces::Springs;
 use crate::core::jacobian::Linearization;
 use crate::core::ode::{OdeState, OdeSystem, ParticleState};
+use crate::core::solve::cholesky::analyse_upper;
 use crate::math::{Scalar, ToScalar, Vector};
-use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
-    factorize_symbolic_cholesky,
-};
+use faer::sparse::linalg::cholesky::{LltRef, SymbolicCholesky};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
@@ -286,20 +284,8 @@ impl Factor {
         if !values.iter().all(|v| v.is_finite()) {
             return None;
         }
+        let (symbolic, mut l_values, mut buf) = analyse_upper(dim, &col_ptr, &row_idx, 3)?;
         let sym = SymbolicSparseColMatRef::new_checked(dim, dim, &col_ptr, None, &row_idx);
-        let symbolic = factorize_symbolic_cholesky(
-            sym,
-            Side::Upper,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .ok()?;
-        let mut l_values = vec![0.0; symbolic.len_val()];
-        let mut buf = MemBuffer::try_new(StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(3, Par::Seq),
-        ]))
-        .ok()?;
         if dim > 0 {
             symbolic
                 .factorize_numeric_llt::<f64>(

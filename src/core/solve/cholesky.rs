@@ -79,6 +79,33 @@ impl std::fmt::Debug for SparseCholesky {
     }
 }
 
+/// The symbolic Cholesky analysis (AMD ordering) of a `dim × dim` upper-triangle pattern in
+/// compressed columns, a buffer for the factor's values, and scratch memory for factoring and
+/// for solving `rhs_columns` right-hand sides at once; `None` when faer refuses the pattern or
+/// the memory.
+pub(crate) fn analyse_upper(
+    dim: usize,
+    col_ptr: &[usize],
+    row_idx: &[usize],
+    rhs_columns: usize,
+) -> Option<(SymbolicCholesky<usize>, Vec<f64>, MemBuffer)> {
+    let sym = SymbolicSparseColMatRef::new_checked(dim, dim, col_ptr, None, row_idx);
+    let symbolic = factorize_symbolic_cholesky(
+        sym,
+        Side::Upper,
+        SymmetricOrdering::Amd,
+        CholeskySymbolicParams::default(),
+    )
+    .ok()?;
+    let l_values = vec![0.0; symbolic.len_val()];
+    let buf = MemBuffer::try_new(StackReq::any_of(&[
+        symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        symbolic.solve_in_place_scratch::<f64>(rhs_columns, Par::Seq),
+    ]))
+    .ok()?;
+    Some((symbolic, l_values, buf))
+}
+
 /// Upper-triangle entries of a 3×3 block, in (column, row) order.
 const UPPER: [(usize, usize); 6] = [(0, 0), (1, 0), (1, 1), (2, 0), (2, 1), (2, 2)];
 
@@ -194,20 +221,7 @@ impl SparseCholesky {
                 }
             })
             .collect();
-        let sym = SymbolicSparseColMatRef::new_checked(dim, dim, &col_ptr, None, &row_idx);
-        let symbolic = factorize_symbolic_cholesky(
-            sym,
-            Side::Upper,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .ok()?;
-        let l_values = vec![0.0; symbolic.len_val()];
-        let buf = MemBuffer::try_new(StackReq::any_of(&[
-            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, Par::Seq),
-        ]))
-        .ok()?;
+        let (symbolic, l_values, buf) = analyse_upper(dim, &col_ptr, &row_idx, 1)?;
         Some(Analysis {
             pairs: a.pairs().to_vec(),
             free,

@@ -2,7 +2,7 @@
 //! spring network, preconditioned conjugate gradients with Baraff–Witkin's constraint filter,
 //! and a sparse direct (Cholesky) solve through faer.
 
-mod cholesky;
+pub(crate) mod cholesky;
 
 pub use cholesky::SparseCholesky;
 
