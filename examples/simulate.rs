@@ -13,14 +13,17 @@
 //! last good frame is kept on disk, and the exit status is 2.
 //!
 //! Options: `--scene circle|pendulum|single_pendulum|cloth|cloth_sphere|wire|pyramid|jelly|cloth_pile`,
-//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b|x|p` (or a name), `--h STEP` (default
+//! `--scene-file FILE`, `--integrator e|s|t|m|r|a|i|d|b|x|p|u` (or a name; `u`/`auto` chooses per body and
+//! prints its choice and reason), `--h STEP` (default
 //! 1 ms; for adaptive RK45 it is the largest step, and defaults to the frame length, so the
 //! error control alone chooses), `--cfl NUMBER`,
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
 //! `--no-guard`, `--obj`, `--out DIR`, `--quiet`, `--threads N` (threads for the force
 //! kernels of one body; default 0: all cores; results are the same bits for any N),
-//! `--solver auto|pcg|cholesky` (the implicit methods' linear solver).
+//! `--solver auto|pcg|cholesky` (the implicit methods' linear solver), `--tolerance E` (for
+//! `auto`: the relative energy error per simulated second it must meet; default none: the
+//! cheapest stable method).
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -53,6 +56,7 @@ struct Args {
     quiet: bool,
     threads: usize,
     solver: SolverChoice,
+    tolerance: Option<f64>,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -74,6 +78,7 @@ fn parse_args() -> Result<Args, String> {
         quiet: false,
         threads: 0,
         solver: SolverChoice::Auto,
+        tolerance: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -110,6 +115,7 @@ fn parse_args() -> Result<Args, String> {
                     .map_err(|_| "--size: not a count".to_string())?
             }
             "--rtol" => a.rtol = num(val("--rtol")?, "--rtol")?,
+            "--tolerance" => a.tolerance = Some(num(val("--tolerance")?, "--tolerance")?),
             "--atol" => a.atol = num(val("--atol")?, "--atol")?,
             "--no-guard" => a.guard = false,
             "--obj" => a.obj = true,
@@ -220,6 +226,10 @@ fn config(a: &Args) -> DriverConfig {
         },
         solver: a.solver,
         energy_guard: if a.guard { Some(100.0) } else { None },
+        auto: bevy_soft_body::core::auto::AutoConfig {
+            tolerance: a.tolerance,
+            ..Default::default()
+        },
     }
 }
 
@@ -324,7 +334,15 @@ fn run(a: &Args) -> Result<(), String> {
                 rows(s, &mut fcsv, &mut ecsv);
                 prog.tick(s.frame);
             });
-            summary(a, &name, sim.frame, sim.stats(), started, 1);
+            summary(
+                a,
+                &name,
+                sim.frame,
+                sim.stats(),
+                started,
+                1,
+                sim.auto_choice().map(|c| (c.kind, c.h)),
+            );
             r
         }
         Some(mut scene) => {
@@ -379,7 +397,13 @@ fn run(a: &Args) -> Result<(), String> {
                 );
             }
             let n = sim.state.x.len();
-            summary(a, &name, sim.frame, sim.stats(), started, n);
+            let method = sim.auto_choice().map(|c| (c.kind, c.h));
+            summary(a, &name, sim.frame, sim.stats(), started, n, method);
+            if let Some(c) = sim.auto_choice()
+                && !a.quiet
+            {
+                println!("auto: {}", c.reason);
+            }
             r
         }
     };
@@ -417,21 +441,20 @@ fn summary(
     st: bevy_soft_body::core::integrate::IntegratorStats,
     started: Instant,
     n: usize,
+    auto: Option<(IntegratorKind, f64)>,
 ) {
     if a.quiet {
         return;
     }
+    // Under Auto: the method and step it chose.
+    let (kind, h) = auto.unwrap_or((a.integrator, step(a)));
     let wall = started.elapsed().as_secs_f64();
     println!(
         "{name} [{}] {} {}={} : {frames} frames, {} steps ({} rejected), {} derivative evaluations, {n} particles, {:.3} s wall ({:.2} µs/step)",
         bevy_soft_body::math::PRECISION,
-        a.integrator.label(),
-        if a.integrator.is_adaptive() {
-            "h_max"
-        } else {
-            "h"
-        },
-        step(a),
+        kind.label(),
+        if kind.is_adaptive() { "h_max" } else { "h" },
+        h,
         st.steps,
         st.rejected,
         st.evaluations,

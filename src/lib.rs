@@ -78,9 +78,9 @@ pub mod prelude {
     };
     #[cfg(feature = "plugin")]
     pub use crate::ecs::{
-        BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial, ExternalForce,
-        GlobalForceFields, GlobalWind, LinearSolverChoice, MeshBody, MeshPins, Particle,
-        ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SelfCollision, SoftBody,
+        AutoSettings, BodyParticles, BodySprings, BodyState, BodyTets, ElasticMaterial,
+        ExternalForce, GlobalForceFields, GlobalWind, LinearSolverChoice, MeshBody, MeshPins,
+        Particle, ParticleOf, Pinned, ResetSoftBodies, ScriptedMotion, SelfCollision, SoftBody,
         SoftBodyClock, SoftBodyCollider, SoftBodyDiagnostics, SoftBodyDiverged,
         SoftBodyForceFields, SoftBodyGltf, SoftBodyGltfSpawned, SoftBodyInitial, SoftBodyInvalid,
         SoftBodyMeshSurface, SoftBodyPlugin, SoftBodySleep, SoftBodySleepingDisabled,

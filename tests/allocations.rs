@@ -38,7 +38,7 @@ static GLOBAL: Counting = Counting;
 fn main() {
     frames_allocate_nothing_after_the_first();
     println!(
-        "allocations: every integrator's frames, the chunked kernels and self-collision allocate nothing"
+        "allocations: every integrator's frames (Auto's after its decision), the chunked kernels and self-collision allocate nothing"
     );
 }
 
@@ -46,7 +46,11 @@ fn frames_allocate_nothing_after_the_first() {
     let mut scene = build::cloth_sphere(&build::ClothParams::default(), 0.25, 0.6, 4.0).unwrap();
     scene.wind = Some(Wind::default());
     let (model, state) = scene.build().unwrap();
-    for kind in IntegratorKind::ALL {
+    // Auto too: it decides (and allocates) in its first frame only.
+    for kind in IntegratorKind::ALL
+        .into_iter()
+        .chain([IntegratorKind::Auto])
+    {
         // Inside each method's stability region on this cloth (fastest mode ω ≈ 245 rad/s).
         let h = match kind {
             IntegratorKind::ForwardEuler => 2e-4,

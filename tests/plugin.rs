@@ -109,6 +109,61 @@ fn plugin_steps_a_pendulum_bitwise_like_the_core_driver() {
     );
 }
 
+/// `IntegratorKind::Auto` through the plugin: the body steps bitwise like the core driver's
+/// Auto, the status names the method in use and the reason, and editing `AutoSettings`
+/// makes it decide again (a tolerance on the chain's energy error asks for more).
+#[test]
+fn auto_through_the_plugin_steps_like_the_core_and_reports_its_choice() {
+    let scene = chain_scene();
+    let body = SoftBody {
+        integrator: IntegratorKind::Auto,
+        ..Default::default()
+    };
+    let mut app = app();
+    let e = spawn(&mut app, &scene, body);
+    for _ in 0..64 {
+        app.update();
+    }
+    let (model, state) = scene.build().unwrap();
+    let mut core = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::Auto,
+            frame_dt: FRAME,
+            ..Default::default()
+        },
+    );
+    core.run(64, |_, _| {}).unwrap();
+    let st = status(&app, e);
+    let choice = core.auto_choice().unwrap();
+    assert_eq!(st.method, choice.kind);
+    assert_eq!(st.auto_reason, choice.reason);
+    assert_eq!(st.substeps, choice.substeps);
+    assert!(st.auto_reason.contains("substep"), "{}", st.auto_reason);
+    let bs = app.world().get::<BodySim>(e).unwrap();
+    assert_eq!(bs.simulation().unwrap().state.x, core.state.x);
+    let loose = st.substeps;
+    app.world_mut()
+        .entity_mut(e)
+        .insert(AutoSettings(AutoConfig {
+            tolerance: Some(1e-3),
+            max_substeps: 64,
+        }));
+    app.update();
+    let st = status(&app, e);
+    println!(
+        "{loose} substeps, then with a tolerance: {}",
+        st.auto_reason
+    );
+    assert!(
+        st.auto_reason.contains("energy error"),
+        "{}",
+        st.auto_reason
+    );
+    assert!(st.substeps > loose || st.method != IntegratorKind::SymplecticEuler);
+}
+
 #[test]
 fn pinned_particles_hold_and_follow_their_targets_exactly() {
     let mut app = app();

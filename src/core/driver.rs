@@ -2,6 +2,7 @@
 //! that land exactly on the frame's end, with a divergence guard that keeps the last good
 //! state and says what happened.
 
+use crate::core::auto::{self, AutoChoice, AutoConfig};
 use crate::core::integrate::{
     AdaptiveConfig, Integrator, IntegratorKind, IntegratorStats, SolverChoice, StepError,
 };
@@ -164,6 +165,9 @@ pub struct DriverConfig {
     /// Linear solver of the implicit methods.
     #[serde(default)]
     pub solver: SolverChoice,
+    /// What [`IntegratorKind::Auto`] aims for (ignored by the other methods).
+    #[serde(default)]
+    pub auto: AutoConfig,
 }
 
 impl DriverConfig {
@@ -193,6 +197,9 @@ impl DriverConfig {
         {
             return Err(format!("energy guard {g} must be a positive number"));
         }
+        if let Err((field, message)) = self.auto.validate() {
+            return Err(format!("auto {field} {message}"));
+        }
         let a = &self.adaptive;
         if !(positive(a.rtol) && positive(a.atol) && positive(a.h_min) && positive(a.safety)) {
             return Err(format!(
@@ -213,6 +220,7 @@ impl Default for DriverConfig {
             adaptive: AdaptiveConfig::default(),
             energy_guard: Some(100.0),
             solver: SolverChoice::Auto,
+            auto: AutoConfig::default(),
         }
     }
 }
@@ -289,7 +297,15 @@ pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
     /// How long the body has been still (s).
     still_for: f64,
     asleep: bool,
+    /// [`IntegratorKind::Auto`]'s current choice (`None`: decide at the next frame's start).
+    auto: Option<AutoChoice>,
+    /// Multiplies the fastest mode's frequency in Auto's stability probe: doubled after each
+    /// divergence of a choice (at most three times), so the frame is retried more cautiously.
+    auto_margin: f64,
 }
+
+/// How many times Auto retries a diverging frame with a more cautious choice.
+const AUTO_RETRIES: u32 = 3;
 
 impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// A simulation starting at time 0.
@@ -313,6 +329,8 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             sleep: None,
             still_for: 0.0,
             asleep: false,
+            auto: None,
+            auto_margin: 1.0,
         }
     }
 
@@ -356,6 +374,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// guard's bound; the integrator starts afresh (its history belongs to the old layout).
     pub fn replace(&mut self, system: Sys, mut state: S) {
         self.wake();
+        self.auto = None;
         system.apply_constraints(self.time, &mut state);
         self.integrator = Self::build_integrator(&system, &self.config);
         self.backup = state.clone();
@@ -371,7 +390,82 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// Switches method (the step-size policy and state are kept).
     pub fn set_integrator(&mut self, kind: IntegratorKind) {
         self.config.integrator = kind;
+        self.auto = None;
+        self.auto_margin = 1.0;
         self.integrator = Self::build_integrator(&self.system, &self.config);
+    }
+
+    /// Sets what [`IntegratorKind::Auto`] aims for; it decides again at the next frame.
+    pub fn set_auto(&mut self, auto: AutoConfig) {
+        self.config.auto = auto;
+        self.auto = None;
+    }
+
+    /// [`IntegratorKind::Auto`]'s choice in force (`None` before the first frame, or with
+    /// another method).
+    pub fn auto_choice(&self) -> Option<&AutoChoice> {
+        self.auto.as_ref()
+    }
+
+    /// Makes [`IntegratorKind::Auto`] decide again at the next frame's start — after an edit
+    /// of the model's stiffness, masses or topology made through [`Simulation::system`]
+    /// directly ([`Simulation::replace`] and the plugin's rebuilds do this themselves).
+    pub fn redecide(&mut self) {
+        self.auto = None;
+    }
+
+    /// The method stepping now: the configured one, or Auto's choice.
+    pub fn method(&self) -> IntegratorKind {
+        self.integrator.kind()
+    }
+
+    /// Auto's decision from the body's spectrum (a system without one, not a particle model,
+    /// gets RK4 at the step policy's `h`), and the integrator for it.
+    fn decide_auto(&mut self) {
+        let frame_dt = self.config.frame_dt;
+        let direct = match self.config.solver {
+            SolverChoice::Auto => self.system.prefers_direct_solver(),
+            SolverChoice::Pcg => false,
+            SolverChoice::Cholesky => true,
+        };
+        let choice = match (self.system.linearization(), self.state.as_particles_mut()) {
+            (Some(lin), Some(state)) => auto::decide_for(
+                lin,
+                state,
+                frame_dt,
+                &self.config.auto,
+                self.auto_margin,
+                direct,
+            ),
+            _ => {
+                let h = match self.config.policy {
+                    StepPolicy::Fixed { h } => h,
+                    StepPolicy::Cfl { max, .. } => max,
+                };
+                let substeps = (frame_dt / h - 1e-9).ceil().max(1.0) as u32;
+                AutoChoice {
+                    kind: IntegratorKind::Rk4,
+                    substeps,
+                    h: frame_dt / substeps as f64,
+                    mode: crate::core::study::FastestMode {
+                        omega: 0.0,
+                        damping: 0.0,
+                    },
+                    omega_accuracy: 0.0,
+                    energy_error: 0.0,
+                    cost_ms: 0.0,
+                    meets_tolerance: true,
+                    candidates: Vec::new(),
+                    reason: format!(
+                        "RK4, {substeps} substeps: not a particle model, so no spectrum to choose from; the step policy's h"
+                    ),
+                }
+            }
+        };
+        let mut config = self.config;
+        config.integrator = choice.kind;
+        self.integrator = Self::build_integrator(&self.system, &config);
+        self.auto = Some(choice);
     }
 
     /// Sets the linear solver of implicit methods (restarts the integrator).
@@ -398,6 +492,9 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
 
     /// The step size the policy gives now.
     pub fn step_size(&self) -> Scalar {
+        if let Some(choice) = self.auto.as_ref() {
+            return (self.config.frame_dt / choice.substeps as f64) as Scalar;
+        }
         match self.config.policy {
             StepPolicy::Fixed { h } => h as Scalar,
             StepPolicy::Cfl { number, max, limit } => {
@@ -415,8 +512,37 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         k as f64 * self.config.frame_dt
     }
 
-    /// Advances one frame in substeps that land exactly on its end.
+    /// Advances one frame in substeps that land exactly on its end. Under
+    /// [`IntegratorKind::Auto`], the choice is made at the frame's start when there is none,
+    /// and a frame that diverges is retried (from the same start) with a more cautious one
+    /// (the stability probe's frequency doubled), at most three times.
     pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
+        if self.config.integrator != IntegratorKind::Auto {
+            return self.advance_frame_once();
+        }
+        let mut retries = 0;
+        loop {
+            if self.auto.is_none() && !self.asleep {
+                self.decide_auto();
+            }
+            match self.advance_frame_once() {
+                Err(d)
+                    if retries < AUTO_RETRIES
+                        && !matches!(
+                            d.reason,
+                            DivergenceReason::Step(StepError::BadStepSize(_))
+                        ) =>
+                {
+                    retries += 1;
+                    self.auto_margin *= 2.0;
+                    self.auto = None;
+                }
+                other => return other,
+            }
+        }
+    }
+
+    fn advance_frame_once(&mut self) -> Result<FrameReport, Divergence> {
         let t_end = self.frame_end(self.frame + 1);
         if self.time != self.time64 as Scalar {
             // Someone set `time`: follow it.
@@ -454,11 +580,12 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             };
             let t = self.time64 as Scalar;
             self.system.apply_constraints(t, &mut self.state);
+            let kind = self.integrator.kind();
             let fail = |reason, h| Divergence {
                 frame: self.frame,
                 time: t as f64,
                 h: h as f64,
-                integrator: self.config.integrator,
+                integrator: kind,
                 reason,
             };
             let taken = match self.integrator.step(&self.system, t, h, &mut self.state) {
@@ -521,7 +648,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                 frame: self.frame,
                 time: t as f64,
                 h: rep.h_max as f64,
-                integrator: self.config.integrator,
+                integrator: self.integrator.kind(),
                 reason: DivergenceReason::NonFinite,
             });
         }

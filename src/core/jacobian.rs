@@ -178,6 +178,10 @@ impl ParticleModel {
 pub trait Linearization: Sync {
     /// Number of particles.
     fn particles(&self) -> usize;
+    /// Springs and tetrahedra (what a step's cost grows with).
+    fn element_counts(&self) -> (usize, usize) {
+        (0, 0)
+    }
     /// A matrix with this system's structure.
     fn new_matrix(&self) -> SpringMatrix;
     /// True when `a` has this system's structure.
@@ -304,6 +308,9 @@ pub trait Linearization: Sync {
 impl Linearization for ParticleModel {
     fn particles(&self) -> usize {
         self.len()
+    }
+    fn element_counts(&self) -> (usize, usize) {
+        (self.springs.len(), self.tets.len())
     }
 
     fn new_matrix(&self) -> SpringMatrix {

@@ -2,6 +2,7 @@
 //! forces, collisions, scene layouts and the headless driver. Everything here can be tested,
 //! benchmarked and charted without a window or an App.
 
+pub mod auto;
 pub mod body_contact;
 pub mod build;
 pub mod collide;

@@ -166,6 +166,7 @@ fn run<S: OdeState, Sys: OdeSystem<S>>(
             adaptive,
             energy_guard: Some(1e3),
             solver: Default::default(),
+            auto: Default::default(),
         },
     );
     let start = Instant::now();

@@ -64,6 +64,15 @@ impl_reflect_opaque!((in bevy_soft_body::core::fem) NeoHookean(
     Serialize,
     Deserialize
 ));
+pub use crate::core::auto::AutoConfig;
+impl_reflect_opaque!((in bevy_soft_body::core::auto) AutoConfig(
+    Clone,
+    Debug,
+    Default,
+    PartialEq,
+    Serialize,
+    Deserialize
+));
 impl_reflect_opaque!((in bevy_soft_body::core::integrate) SolverChoice(
     Clone,
     Debug,
@@ -147,6 +156,11 @@ pub struct SoftBodyStatus {
     pub time: f32,
     /// Substeps in the last fixed step.
     pub substeps: u32,
+    /// The method stepping the body: the [`SoftBody`]'s, or [`IntegratorKind::Auto`]'s
+    /// choice.
+    pub method: IntegratorKind,
+    /// Under [`IntegratorKind::Auto`]: what it chose and why (empty otherwise).
+    pub auto_reason: String,
     /// Wall time of the last fixed step of this body (ms).
     pub step_ms: f32,
     /// Linear-solver (conjugate-gradient) iterations in the last fixed step.
@@ -312,6 +326,12 @@ pub struct ElasticMaterial(pub NeoHookean);
 #[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
 #[reflect(Component, Default, Debug)]
 pub struct LinearSolverChoice(pub SolverChoice);
+
+/// What [`IntegratorKind::Auto`] aims for on this body (default: the cheapest stable method,
+/// at most 64 substeps per frame; see [`AutoConfig`]). Editing it makes Auto decide again.
+#[derive(Component, Reflect, Clone, Copy, Debug, Default, PartialEq)]
+#[reflect(Component, Default, Debug)]
+pub struct AutoSettings(pub AutoConfig);
 
 /// The body a [`Spring`] belongs to.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq, Eq)]

@@ -101,7 +101,7 @@ impl Default for SoftBodyUi {
     }
 }
 
-const LETTERS: [(KeyCode, IntegratorKind); 11] = [
+const LETTERS: [(KeyCode, IntegratorKind); 12] = [
     (KeyCode::KeyE, IntegratorKind::ForwardEuler),
     (KeyCode::KeyS, IntegratorKind::SymplecticEuler),
     (KeyCode::KeyT, IntegratorKind::Trapezoid),
@@ -113,6 +113,7 @@ const LETTERS: [(KeyCode, IntegratorKind); 11] = [
     (KeyCode::KeyB, IntegratorKind::BackwardEuler),
     (KeyCode::KeyX, IntegratorKind::Xpbd),
     (KeyCode::KeyP, IntegratorKind::ProjectiveDynamics),
+    (KeyCode::KeyU, IntegratorKind::Auto),
 ];
 
 /// Whether egui is using the keyboard (`keyboard`) or the pointer: an app's own controls
@@ -366,6 +367,9 @@ fn panel(
                     cg.unwrap_or(0.0)
                 ));
             }
+            if !status.auto_reason.is_empty() {
+                ui.label(format!("auto: {}", status.auto_reason));
+            }
             match &status.state {
                 BodyState::Diverged(m) | BodyState::Invalid(m) => {
                     ui.colored_label(egui::Color32::from_rgb(255, 110, 90), m);
@@ -379,7 +383,7 @@ fn panel(
             egui::ComboBox::from_label("integrator")
                 .selected_text(kind.label())
                 .show_ui(ui, |ui| {
-                    for k in IntegratorKind::ALL {
+                    for k in IntegratorKind::ALL.into_iter().chain([IntegratorKind::Auto]) {
                         ui.selectable_value(&mut kind, k, format!("{} ({})", k.label(), k.letter()));
                     }
                 });

@@ -61,6 +61,11 @@ pub enum IntegratorKind {
     /// `p`: projective dynamics (Bouaziz et al. 2014): backward Euler by local/global
     /// iterations with a prefactored sparse Cholesky.
     ProjectiveDynamics,
+    /// `u`: automatic: per body, the cheapest method and substep count that is stable at the
+    /// frame's length and meets a tolerance, chosen by the driver from the body's fastest mode
+    /// (see [`crate::core::auto`]). Not a method of its own: it is not in [`Self::ALL`], and
+    /// built alone (outside a [`Simulation`](crate::core::driver::Simulation)) it is RK4.
+    Auto,
 }
 
 /// Number of explicit kinds in [`IntegratorKind::ALL`].
@@ -107,7 +112,8 @@ impl IntegratorKind {
         out
     };
 
-    /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`, `i`, `d`, `b`, `x`, `p`).
+    /// The one-letter code (`e`, `s`, `t`, `m`, `r`, `a`, `i`, `d`, `b`, `x`, `p`; `u` for
+    /// [`Auto`](Self::Auto)).
     pub fn letter(self) -> char {
         match self {
             Self::ForwardEuler => 'e',
@@ -121,6 +127,7 @@ impl IntegratorKind {
             Self::BackwardEuler => 'b',
             Self::Xpbd => 'x',
             Self::ProjectiveDynamics => 'p',
+            Self::Auto => 'u',
         }
     }
 
@@ -138,6 +145,7 @@ impl IntegratorKind {
             Self::BackwardEuler => "backward_euler",
             Self::Xpbd => "xpbd",
             Self::ProjectiveDynamics => "projective_dynamics",
+            Self::Auto => "auto",
         }
     }
 
@@ -155,6 +163,7 @@ impl IntegratorKind {
             Self::BackwardEuler => "backward Euler (Newton)",
             Self::Xpbd => "XPBD (small steps)",
             Self::ProjectiveDynamics => "projective dynamics",
+            Self::Auto => "auto (chosen per body)",
         }
     }
 
@@ -170,7 +179,7 @@ impl IntegratorKind {
             | Self::Xpbd
             | Self::ProjectiveDynamics => 1,
             Self::Trapezoid | Self::Midpoint => 2,
-            Self::Rk4 => 4,
+            Self::Rk4 | Self::Auto => 4,
             Self::Rk45 => 5,
         }
     }
@@ -188,7 +197,7 @@ impl IntegratorKind {
             | Self::Xpbd
             | Self::ProjectiveDynamics => 1,
             Self::Trapezoid | Self::Midpoint => 2,
-            Self::Rk4 => 4,
+            Self::Rk4 | Self::Auto => 4,
             Self::Rk45 => 6,
         }
     }
@@ -256,7 +265,7 @@ impl IntegratorKind {
             Self::SymplecticEuler => Box::new(SymplecticEuler::default()),
             Self::Trapezoid => Box::new(Trapezoid::default()),
             Self::Midpoint => Box::new(Midpoint::default()),
-            Self::Rk4 => Box::new(Rk4::default()),
+            Self::Rk4 | Self::Auto => Box::new(Rk4::default()),
             Self::Rk45 => Box::new(DormandPrince::new(adaptive)),
             Self::LinearlyImplicitEuler => Box::new(LinearlyImplicitEuler::default()),
             Self::ImplicitDampingTrapezoid => Box::new(ImplicitDampingTrapezoid::default()),
@@ -300,7 +309,7 @@ impl fmt::Display for UnknownIntegrator {
             }
             write!(f, "{} ({})", k.letter(), k.name())?;
         }
-        Ok(())
+        f.write_str(", u (auto)")
     }
 }
 
@@ -330,6 +339,7 @@ impl FromStr for IntegratorKind {
             "b" | "backward_euler" | "implicit_euler" | "newton" => Self::BackwardEuler,
             "x" | "xpbd" | "pbd" | "position_based" => Self::Xpbd,
             "p" | "pd" | "projective" | "projective_dynamics" => Self::ProjectiveDynamics,
+            "u" | "auto" | "automatic" => Self::Auto,
             _ => return Err(UnknownIntegrator(s.to_string())),
         };
         Ok(k)

@@ -179,6 +179,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<BodyTets>()
             .register_type::<ElasticMaterial>()
             .register_type::<LinearSolverChoice>()
+            .register_type::<AutoSettings>()
             .register_type::<SpringOf>()
             .register_type::<BodySprings>()
             .register_type::<Pinned>()

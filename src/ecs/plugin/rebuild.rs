@@ -22,6 +22,8 @@ struct FemInput<'a, 'w, 's> {
     tets: &'a Query<'w, 's, Ref<'static, Tet>>,
     material: Option<NeoHookean>,
     solver: SolverChoice,
+    /// What the automatic method aims for.
+    auto: AutoConfig,
     /// Self-collision, the surface's triangles (empty: the tets' boundary) and which particles
     /// were torn from which.
     self_collision: Option<(SelfCollision, Vec<[u32; 3]>, Vec<u32>)>,
@@ -215,6 +217,7 @@ fn build_body(
         frame_dt,
         energy_guard: body.energy_guard.map(|g| g as f64),
         solver: fem.solver,
+        auto: fem.auto,
         ..Default::default()
     };
     config
@@ -256,6 +259,7 @@ pub(crate) fn prepare(
             Option<Mut<SoftBodySurface>>,
             Option<Ref<Tearable>>,
             Has<SoftBodySleepingDisabled>,
+            Option<Ref<AutoSettings>>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -304,7 +308,17 @@ pub(crate) fn prepare(
         plist,
         slist,
         wind,
-        (tlist, material, solver, fields, self_collision, mut surface, tearable, no_sleep),
+        (
+            tlist,
+            material,
+            solver,
+            fields,
+            self_collision,
+            mut surface,
+            tearable,
+            no_sleep,
+            auto_settings,
+        ),
     ) in &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
@@ -321,6 +335,7 @@ pub(crate) fn prepare(
             || bs.tets.as_slice() != tlist
             || material.as_ref().is_some_and(|m| m.is_changed())
             || solver.as_ref().is_some_and(|m| m.is_changed())
+            || auto_settings.as_ref().is_some_and(|a| a.is_changed())
             || self_collision.as_ref().is_some_and(|c| c.is_changed())
             || tearable.as_ref().is_some_and(|t| t.is_changed())
             || (self_collision.is_some() && surface.as_ref().is_some_and(|s| s.is_changed()))
@@ -392,6 +407,7 @@ pub(crate) fn prepare(
                 tets: &tets,
                 material: material.map(|m| m.0),
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
+                auto: auto_settings.map_or(AutoConfig::default(), |a| a.0),
                 self_collision: self_collision.map(|c| {
                     let (tris, from) = surface.map_or((vec![], vec![]), |s| {
                         (s.triangles.clone(), s.torn_from.clone())

@@ -102,6 +102,12 @@ pub(super) fn step(
                         BodyState::Running
                     };
                     status.substeps = rep.substeps;
+                    status.method = sim.method();
+                    // Compared first: a frame that keeps the choice allocates nothing.
+                    let reason = sim.auto_choice().map_or("", |c| c.reason.as_str());
+                    if status.auto_reason != reason {
+                        status.auto_reason = reason.to_string();
+                    }
                 }
                 Err(d) => {
                     status.state = BodyState::Diverged(d.to_string());
