@@ -390,7 +390,10 @@ fn panel(
             if kind != body.integrator {
                 body.integrator = kind;
             }
-            if let StepPolicy::Fixed { h } = body.step {
+            // Under Auto the step is Auto's (the reason above says which).
+            if let StepPolicy::Fixed { h } = body.step
+                && body.integrator != IntegratorKind::Auto
+            {
                 let mut hv = h;
                 ui.add(
                     egui::Slider::new(&mut hv, 1e-5..=0.1)
@@ -561,7 +564,7 @@ fn panel(
                     });
                 }
             }
-            ui.small("Space pause · N step · R reset · W wind · G wireframe · E S T M K A I D B X P method · mouse: drag particles, right-drag orbit, wheel zoom");
+            ui.small("Space pause · N step · R reset · W wind · G wireframe · E S T M K A I D B X P U method · mouse: drag particles, right-drag orbit, wheel zoom");
         });
     Ok(())
 }
