@@ -318,6 +318,7 @@ impl Linearization for ParticleModel {
             return SpringMatrix::new(self.len(), &self.springs);
         }
         SpringMatrix::with_pairs(self.len(), self.matrix_pairs().collect())
+            .with_symmetric_prefix(self.springs.len())
     }
 
     fn matrix_matches(&self, a: &SpringMatrix) -> bool {
