@@ -446,13 +446,27 @@ pub fn decide(
     config: &AutoConfig,
     margin: f64,
 ) -> AutoChoice {
+    decide_excluding(mode, frame_dt, size, config, margin, &[])
+}
+
+/// [`decide`] without the methods in `excluded` (those that diverged on this body: a
+/// nonlinear blow-up the test equation cannot show, such as linearly implicit Euler's single
+/// Newton step on a hard-yanked stiff solid).
+pub fn decide_excluding(
+    mode: FastestMode,
+    frame_dt: f64,
+    size: BodySize,
+    config: &AutoConfig,
+    margin: f64,
+    excluded: &[IntegratorKind],
+) -> AutoChoice {
     let omega = mode.omega;
     let omega_acc = omega.min(std::f64::consts::PI / (4.0 * frame_dt));
     let budget = config.max_substeps.max(1);
     let elements = size.tets > 0;
     let mut candidates = Vec::new();
     for kind in CANDIDATES {
-        if elements && !kind.supports_elements() {
+        if (elements && !kind.supports_elements()) || excluded.contains(&kind) {
             continue;
         }
         let stable_at = |n: u32| {
@@ -542,9 +556,13 @@ pub fn decide(
     if margin > 1.0 {
         let _ = write!(
             reason,
-            " (probed at {:.0}× the fastest mode after a diverging frame)",
+            " (probed at {:.1}× the fastest mode after a diverging frame",
             OMEGA_MARGIN * margin
         );
+        for k in excluded {
+            let _ = write!(reason, "; {} diverged here", k.label());
+        }
+        reason.push(')');
     }
     match config.tolerance {
         Some(tol) if best.meets => {
@@ -647,6 +665,20 @@ pub fn decide_for(
     margin: f64,
     direct: bool,
 ) -> AutoChoice {
+    decide_for_excluding(lin, state, frame_dt, config, margin, direct, &[])
+}
+
+/// [`decide_for`] without the methods in `excluded` (see [`decide_excluding`]).
+#[allow(clippy::too_many_arguments)]
+pub fn decide_for_excluding(
+    lin: &dyn Linearization,
+    state: &ParticleState,
+    frame_dt: f64,
+    config: &AutoConfig,
+    margin: f64,
+    direct: bool,
+    excluded: &[IntegratorKind],
+) -> AutoChoice {
     let mode = spectrum(lin, state);
     let (springs, tets) = lin.element_counts();
     let size = BodySize {
@@ -655,5 +687,5 @@ pub fn decide_for(
         tets,
         direct,
     };
-    decide(mode, frame_dt, size, config, margin)
+    decide_excluding(mode, frame_dt, size, config, margin, excluded)
 }

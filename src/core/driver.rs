@@ -302,6 +302,9 @@ pub struct Simulation<S: OdeState, Sys: OdeSystem<S>> {
     /// Multiplies the fastest mode's frequency in Auto's stability probe: doubled after each
     /// divergence of a choice (at most three times), so the frame is retried more cautiously.
     auto_margin: f64,
+    /// Methods that diverged on this body under Auto: left out of its later choices (a
+    /// nonlinear blow-up the test equation does not show).
+    auto_excluded: Vec<IntegratorKind>,
 }
 
 /// How many times Auto retries a diverging frame with a more cautious choice.
@@ -331,6 +334,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             asleep: false,
             auto: None,
             auto_margin: 1.0,
+            auto_excluded: Vec::new(),
         }
     }
 
@@ -392,6 +396,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         self.config.integrator = kind;
         self.auto = None;
         self.auto_margin = 1.0;
+        self.auto_excluded.clear();
         self.integrator = Self::build_integrator(&self.system, &self.config);
     }
 
@@ -429,13 +434,14 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             SolverChoice::Cholesky => true,
         };
         let choice = match (self.system.linearization(), self.state.as_particles_mut()) {
-            (Some(lin), Some(state)) => auto::decide_for(
+            (Some(lin), Some(state)) => auto::decide_for_excluding(
                 lin,
                 state,
                 frame_dt,
                 &self.config.auto,
                 self.auto_margin,
                 direct,
+                &self.auto_excluded,
             ),
             _ => {
                 let h = match self.config.policy {
@@ -515,7 +521,8 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
     /// Advances one frame in substeps that land exactly on its end. Under
     /// [`IntegratorKind::Auto`], the choice is made at the frame's start when there is none,
     /// and a frame that diverges is retried (from the same start) with a more cautious one
-    /// (the stability probe's frequency doubled), at most three times.
+    /// (the stability probe's frequency doubled, and an implicit method that blew up left out
+    /// from then on), at most three times.
     pub fn advance_frame(&mut self) -> Result<FrameReport, Divergence> {
         if self.config.integrator != IntegratorKind::Auto {
             return self.advance_frame_once();
@@ -535,6 +542,11 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
                 {
                     retries += 1;
                     self.auto_margin *= 2.0;
+                    // A method that blew up here is not chosen again for this body (explicit
+                    // ones get the wider margin instead: more substeps may hold them).
+                    if d.integrator.is_implicit() && !self.auto_excluded.contains(&d.integrator) {
+                        self.auto_excluded.push(d.integrator);
+                    }
                     self.auto = None;
                 }
                 other => return other,
