@@ -165,6 +165,7 @@ fn main() {
             &AutoConfig::default(),
             1.0,
             model.prefers_direct_solver(),
+            &[],
         );
         let decide_ms = t.elapsed().as_secs_f64() * 1e3;
         println!(

@@ -169,7 +169,7 @@ fn a_tolerance_is_met_and_tighter_ones_cost_more() {
             tolerance: Some(tol),
             max_substeps: 256,
         };
-        let c = auto::decide(mode, 1.0 / 60.0, size, &config, 1.0);
+        let c = auto::decide(mode, 1.0 / 60.0, size, &config, 1.0, &[]);
         println!("tolerance {tol}: {}", c.reason);
         assert!(c.meets_tolerance, "{tol}: {}", c.reason);
         let again = auto::probe(

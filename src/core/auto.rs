@@ -438,21 +438,10 @@ pub fn step_cost_ns(kind: IntegratorKind, size: BodySize, h_omega: f64) -> f64 {
 
 /// Chooses a method and substep count for a body whose fastest mode is `mode`, stepped in
 /// frames of `frame_dt`, with `margin` multiplying the stability probe's `ω` (1 at first;
-/// the driver doubles it after a divergence).
+/// the driver doubles it after a divergence), leaving out the methods in `excluded` (those
+/// that diverged on this body: a nonlinear blow-up the test equation cannot show, such as
+/// linearly implicit Euler's single Newton step on a hard-yanked stiff solid).
 pub fn decide(
-    mode: FastestMode,
-    frame_dt: f64,
-    size: BodySize,
-    config: &AutoConfig,
-    margin: f64,
-) -> AutoChoice {
-    decide_excluding(mode, frame_dt, size, config, margin, &[])
-}
-
-/// [`decide`] without the methods in `excluded` (those that diverged on this body: a
-/// nonlinear blow-up the test equation cannot show, such as linearly implicit Euler's single
-/// Newton step on a hard-yanked stiff solid).
-pub fn decide_excluding(
     mode: FastestMode,
     frame_dt: f64,
     size: BodySize,
@@ -656,21 +645,9 @@ fn smallest(budget: u32, ok: impl Fn(u32) -> bool) -> Option<u32> {
 }
 
 /// Auto's decision for a linearized body at `state`, its implicit methods solving directly
-/// (`direct`) or with PCG.
-pub fn decide_for(
-    lin: &dyn Linearization,
-    state: &ParticleState,
-    frame_dt: f64,
-    config: &AutoConfig,
-    margin: f64,
-    direct: bool,
-) -> AutoChoice {
-    decide_for_excluding(lin, state, frame_dt, config, margin, direct, &[])
-}
-
-/// [`decide_for`] without the methods in `excluded` (see [`decide_excluding`]).
+/// (`direct`) or with PCG, without the methods in `excluded` (see [`decide`]).
 #[allow(clippy::too_many_arguments)]
-pub fn decide_for_excluding(
+pub fn decide_for(
     lin: &dyn Linearization,
     state: &ParticleState,
     frame_dt: f64,
@@ -687,5 +664,5 @@ pub fn decide_for_excluding(
         tets,
         direct,
     };
-    decide_excluding(mode, frame_dt, size, config, margin, excluded)
+    decide(mode, frame_dt, size, config, margin, excluded)
 }

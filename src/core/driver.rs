@@ -434,7 +434,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             SolverChoice::Cholesky => true,
         };
         let choice = match (self.system.linearization(), self.state.as_particles_mut()) {
-            (Some(lin), Some(state)) => auto::decide_for_excluding(
+            (Some(lin), Some(state)) => auto::decide_for(
                 lin,
                 state,
                 frame_dt,
