@@ -16,8 +16,6 @@
 use bevy_soft_body::core::auto::{self, AutoConfig, CANDIDATES};
 use bevy_soft_body::core::build;
 use bevy_soft_body::core::driver::{DriverConfig, Simulation, StepPolicy};
-use bevy_soft_body::core::fem::NeoHookean;
-use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::integrate::IntegratorKind;
 use bevy_soft_body::core::ode::{OdeSystem, ParticleState};
 use bevy_soft_body::core::particles::ParticleModel;
@@ -26,26 +24,11 @@ use bevy_soft_body::core::study::{self, StabilityScene};
 use bevy_soft_body::math::PRECISION;
 use std::time::Instant;
 
+#[path = "headless/mod.rs"]
+mod headless;
+use headless::{read, tet_body};
+
 const FRAME: f64 = 1.0 / 60.0;
-
-/// A file of the repository, from the crate's root or the working directory.
-fn read(rel: &str) -> Option<(String, String)> {
-    [env!("CARGO_MANIFEST_DIR"), "."].iter().find_map(|root| {
-        let path = format!("{root}/{rel}");
-        std::fs::read_to_string(&path).ok().map(|t| (path, t))
-    })
-}
-
-fn tet_body(name: &str, young: f64, poisson: f64) -> Option<(ParticleModel, ParticleState)> {
-    let (path, text) = read(&format!("assets/meshes/{name}_coarse.mesh"))?;
-    let mesh = TetMesh::from_medit(&path, &text).ok()?;
-    let mat = NeoHookean {
-        young,
-        poisson,
-        density: 1000.0,
-    };
-    build::hung_tet_body(&mesh, mat, 2.0).build().ok()
-}
 
 /// The scenes by name.
 fn scene(name: &str) -> Option<(ParticleModel, ParticleState)> {

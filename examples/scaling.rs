@@ -146,29 +146,25 @@ fn main() {
         let _ = writeln!(csv, "{PRECISION},{},{},{},{}", r.0.name(), r.1, r.2, r.3);
     }
     std::fs::write(out.join("scaling.csv"), csv).expect("write CSV");
-    for ext in ["png", "svg"] {
-        let path = out.join(format!("scaling.{ext}"));
-        let res = if ext == "svg" {
-            chart(
-                SVGBackend::new(&path, (900, 600)).into_drawing_area(),
-                &rows,
-                &slopes,
-            )
-        } else {
-            chart(
-                BitMapBackend::new(&path, (900, 600)).into_drawing_area(),
-                &rows,
-                &slopes,
-            )
-        };
-        if let Err(e) = res {
-            eprintln!("chart {}: {e}", path.display());
-        }
-    }
+    headless::save(&out, "scaling", (900, 600), &ScalingChart(&rows, &slopes));
     println!("\nwrote {}", out.join("scaling.csv").display());
 }
 
 type Rows = [(IntegratorKind, usize, f64, f64)];
+
+struct ScalingChart<'a>(&'a Rows, &'a [(IntegratorKind, Option<f64>)]);
+
+impl headless::Chart for ScalingChart<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        chart(root, self.0, self.1)
+    }
+}
 
 fn chart<DB: DrawingBackend>(
     root: DrawingArea<DB, plotters::coord::Shift>,

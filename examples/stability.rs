@@ -101,27 +101,25 @@ fn main() {
         );
     }
     std::fs::write(out.join("stability.csv"), csv).expect("write CSV");
-    for ext in ["png", "svg"] {
-        let path = out.join(format!("stability.{ext}"));
-        let res = if ext == "svg" {
-            chart(
-                SVGBackend::new(&path, (900, 560)).into_drawing_area(),
-                &rows,
-            )
-        } else {
-            chart(
-                BitMapBackend::new(&path, (900, 560)).into_drawing_area(),
-                &rows,
-            )
-        };
-        if let Err(e) = res {
-            eprintln!("chart {}: {e}", path.display());
-        }
-    }
+    headless::save(&out, "stability", (900, 560), &StabilityChart(&rows));
     println!(
         "\nwrote {} and the chart beside it",
         out.join("stability.csv").display()
     );
+}
+
+struct StabilityChart<'a>(&'a [Row]);
+
+impl headless::Chart for StabilityChart<'_> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: DrawingArea<DB, plotters::coord::Shift>,
+    ) -> Result<(), Box<dyn std::error::Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        chart(root, self.0)
+    }
 }
 
 fn chart<DB: DrawingBackend>(

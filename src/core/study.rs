@@ -246,28 +246,152 @@ pub fn work_precision(problem: Problem, kinds: &[IntegratorKind], quick: bool) -
                 .collect()
         };
         for h in sweep {
-            let (end, stats, seconds) = match problem {
+            out.push(match problem {
                 Problem::Circle => {
                     let (s, st, secs) = run(CircleSystem, Vector::X, kind, h, t);
-                    (s.map(|x| vec![x]), st, secs)
+                    point(kind, h, s.map(|x| vec![x]), st, secs, &reference)
                 }
                 _ => {
                     let (m, s) = problem.particles();
                     let (s, st, secs) = run(m, s, kind, h, t);
-                    (s.map(|s| s.x), st, secs)
+                    point(kind, h, s.map(|s| s.x), st, secs, &reference)
                 }
-            };
-            out.push(WorkPoint {
-                method: kind,
-                h,
-                error: end.map(|x| max_distance(&x, &reference)),
-                evaluations: stats.evaluations,
-                linear_solves: stats.linear_solves,
-                seconds,
             });
         }
     }
     out
+}
+
+fn point(
+    method: IntegratorKind,
+    h: f64,
+    end: Option<Vec<Vector>>,
+    stats: IntegratorStats,
+    seconds: f64,
+    reference: &[Vector],
+) -> WorkPoint {
+    WorkPoint {
+        method,
+        h,
+        error: end.map(|x| max_distance(&x, reference)),
+        evaluations: stats.evaluations,
+        linear_solves: stats.linear_solves,
+        seconds,
+    }
+}
+
+/// A work-precision problem on a body the caller builds: the finite-element bodies, or any
+/// scene at the step sizes games use. Every fixed-step method runs over the same `steps` (no
+/// per-order shift: here the point is where the methods meet at large steps, and where the
+/// explicit ones stop being stable); RK45 over `tolerances`. The reference is RK4 at
+/// `reference_step`, cross-checked against RK4 at twice that step.
+#[derive(Clone, Debug)]
+pub struct BodyProblem {
+    /// A short name for files and tables.
+    pub name: String,
+    /// The body.
+    pub model: ParticleModel,
+    /// Its initial state.
+    pub state: ParticleState,
+    /// The time the error is measured at (s); a multiple of every step.
+    pub horizon: f64,
+    /// The swept step sizes, largest first.
+    pub steps: Vec<f64>,
+    /// The tolerances swept for RK45 (rtol = atol).
+    pub tolerances: Vec<f64>,
+    /// RK4's step for the reference solution.
+    pub reference_step: f64,
+}
+
+impl BodyProblem {
+    /// The large-step sweep: one step per 1/60 s frame, then halved `count − 1` times.
+    pub fn frame_steps(count: usize) -> Vec<f64> {
+        (0..count)
+            .map(|k| 1.0 / (60.0 * f64::powi(2.0, k as i32)))
+            .collect()
+    }
+
+    /// A body swept from one step per 1/60 s frame down by halves until `h ω ≤ 1/4` for its
+    /// fastest mode `ω` (Lanczos, [`crate::core::auto::spectrum`]), so that the explicit
+    /// methods, stable below `h ω = 2` (symplectic Euler) or `2√2` (RK4), get at least three
+    /// stable points; RK45 at tolerances 1e-2 … 1e-6; the reference at a quarter of the
+    /// smallest step.
+    pub fn from_frame(
+        name: &str,
+        model: ParticleModel,
+        state: ParticleState,
+        horizon: f64,
+    ) -> Self {
+        let omega = model
+            .linearization()
+            .map_or(0.0, |lin| crate::core::auto::spectrum(lin, &state).omega);
+        let ratio = (omega / 60.0 / 0.25).max(1.0);
+        let count = ratio.log2().ceil() as usize + 1;
+        let steps = Self::frame_steps(count);
+        let reference_step = steps.last().copied().unwrap_or(1.0 / 60.0) / 4.0;
+        Self {
+            name: name.into(),
+            model,
+            state,
+            horizon,
+            steps,
+            tolerances: (0..5).map(|k| 1e-2 / f64::powi(10.0, k)).collect(),
+            reference_step,
+        }
+    }
+
+    /// True when `kind` steps this body: every method on springs; on finite elements, those
+    /// with [`IntegratorKind::supports_elements`].
+    pub fn supports(&self, kind: IntegratorKind) -> bool {
+        kind != IntegratorKind::Auto && (self.model.tets.is_empty() || kind.supports_elements())
+    }
+
+    /// The reference positions at the horizon and their difference from the cross-check (an
+    /// upper estimate of the reference's own error: RK4's error at twice the step is 16× its
+    /// error at the step).
+    pub fn reference(&self) -> (Vec<Vector>, f64) {
+        let go = |h: f64| {
+            run(
+                self.model.clone(),
+                self.state.clone(),
+                IntegratorKind::Rk4,
+                h,
+                self.horizon,
+            )
+            .0
+            .map(|s| s.x)
+        };
+        match (go(self.reference_step), go(2.0 * self.reference_step)) {
+            (Some(x), Some(y)) => {
+                let d = max_distance(&x, &y);
+                (x, d)
+            }
+            _ => (self.state.x.clone(), f64::INFINITY),
+        }
+    }
+
+    /// The sweep of `kinds` (those this body supports) against `reference`.
+    pub fn work_precision(&self, kinds: &[IntegratorKind], reference: &[Vector]) -> Vec<WorkPoint> {
+        let mut out = vec![];
+        for &kind in kinds.iter().filter(|k| self.supports(**k)) {
+            let sweep = if kind.is_adaptive() {
+                &self.tolerances
+            } else {
+                &self.steps
+            };
+            for &h in sweep {
+                let (s, st, secs) = run(
+                    self.model.clone(),
+                    self.state.clone(),
+                    kind,
+                    h,
+                    self.horizon,
+                );
+                out.push(point(kind, h, s.map(|s| s.x), st, secs, reference));
+            }
+        }
+        out
+    }
 }
 
 /// The least-squares slope of `log(error)` against `log(h)` over the points of `method` whose
@@ -291,6 +415,42 @@ pub fn measured_order(
         return None;
     }
     least_squares_slope(&xy)
+}
+
+/// The points of `method` after its last divergence (sweeps run largest step first): the
+/// steps at which it is stable, for [`measured_order`] on a large-step sweep, where the
+/// explicit methods diverge at the large end by design.
+pub fn stable_tail(points: &[WorkPoint], method: IntegratorKind) -> Vec<WorkPoint> {
+    let mine: Vec<&WorkPoint> = points.iter().filter(|p| p.method == method).collect();
+    let start = mine
+        .iter()
+        .rposition(|p| p.error.is_none())
+        .map_or(0, |i| i + 1);
+    mine[start..].iter().map(|p| (*p).clone()).collect()
+}
+
+/// What `method` costs to reach `target` error on a sweep: the wall time (s), interpolated
+/// log–log between the last stable point above the target and the first below it; with
+/// `at_largest` true when the largest stable step already meets it (the cost is then that
+/// step's, an upper bound). `None` when no stable point meets it.
+pub fn cost_at(points: &[WorkPoint], method: IntegratorKind, target: f64) -> Option<(f64, bool)> {
+    let tail = stable_tail(points, method);
+    let first = tail
+        .iter()
+        .position(|p| p.error.is_some_and(|e| e <= target))?;
+    let below = &tail[first];
+    if first == 0 {
+        return Some((below.seconds, true));
+    }
+    let above = &tail[first - 1];
+    let (ea, eb) = (above.error?.ln(), below.error?.ln());
+    let (ca, cb) = (above.seconds.max(1e-9).ln(), below.seconds.max(1e-9).ln());
+    let s = if ea > eb {
+        (ea - target.ln()) / (ea - eb)
+    } else {
+        1.0
+    };
+    Some(((ca + s * (cb - ca)).exp(), false))
 }
 
 /// The least-squares slope of `y` against `x` (`None` with fewer than two distinct `x`).
