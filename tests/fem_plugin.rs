@@ -1,7 +1,7 @@
 //! Tet bodies through the plugin (headless `MinimalPlugins`, 1/64 s fixed steps): they step
 //! bit-for-bit as the core driver, use the sparse Cholesky by default, report bad tets naming
 //! the entity, leave out tets whose particles are gone, skin display meshes, and load through
-//! the asset loader.
+//! the asset loader; a default body (Auto) stays stable on a stiff solid.
 #![cfg(feature = "plugin")]
 #![allow(clippy::unnecessary_cast)]
 
@@ -326,6 +326,75 @@ fn a_yanked_stiff_armadillo_diverges_contained_with_linearly_implicit_euler_only
         } else {
             assert_eq!(diverged, 0);
             assert_eq!(st.state, BodyState::Running);
+        }
+    }
+}
+
+/// A new body's default method is `Auto`: the stiff armadillo (E = 1 MPa, ν = 0.45, fastest
+/// mode ω ≈ 30,000 rad/s) spawned with `SoftBody::default()` and hung by its top runs 1 s
+/// without a divergence, names the method Auto chose and why; the former default, RK4 at
+/// h = 1/240 s (h ω ≈ 125, against RK4's bound 2√2), blows up on the same body.
+#[test]
+fn a_default_body_chooses_a_stable_method_where_the_former_default_blew_up() {
+    let text = std::fs::read_to_string("assets/meshes/armadillo_coarse.mesh").unwrap();
+    let mesh = TetMesh::from_medit("armadillo_coarse.mesh", &text).unwrap();
+    let mat = NeoHookean {
+        young: 1e6,
+        poisson: 0.45,
+        density: 1000.0,
+    };
+    assert_eq!(SoftBody::default().integrator, IntegratorKind::Auto);
+    let former = SoftBody {
+        integrator: IntegratorKind::Rk4,
+        step: StepPolicy::Fixed { h: 1.0 / 240.0 },
+        ..Default::default()
+    };
+    for (name, body) in [("default", SoftBody::default()), ("former default", former)] {
+        let mut app = app();
+        let m = mesh.clone();
+        let b = body.clone();
+        let e = app
+            .world_mut()
+            .run_system_once(move |mut c: Commands| {
+                c.spawn_tet_body(&m, mat, b.clone(), None).unwrap()
+            })
+            .unwrap();
+        app.update();
+        let parts: Vec<Entity> = app
+            .world()
+            .get::<BodyParticles>(e)
+            .unwrap()
+            .entities()
+            .to_vec();
+        let top = 0.95 * mesh.bounds().1[1] as f32;
+        for p in &parts {
+            if app.world().get::<Particle>(*p).unwrap().position.y > top {
+                app.world_mut().entity_mut(*p).insert(Pinned::here());
+            }
+        }
+        let mut diverged = 0;
+        for _ in 0..64 {
+            app.update();
+            let msgs = app.world().resource::<Messages<SoftBodyDiverged>>();
+            diverged += msgs.iter_current_update_messages().count();
+            for p in &parts {
+                let q = app.world().get::<Particle>(*p).unwrap();
+                assert!(q.position.is_finite() && q.velocity.is_finite());
+            }
+        }
+        let st = app.world().get::<SoftBodyStatus>(e).unwrap().clone();
+        println!(
+            "{name}: {diverged} divergence(s), {:?}, method {}, {}",
+            st.state, st.method, st.auto_reason
+        );
+        if body.integrator == IntegratorKind::Auto {
+            assert_eq!(diverged, 0);
+            assert_eq!(st.state, BodyState::Running);
+            assert_ne!(st.method, IntegratorKind::Auto);
+            assert!(!st.auto_reason.is_empty());
+        } else {
+            assert_eq!(diverged, 1);
+            assert!(matches!(st.state, BodyState::Diverged(_)));
         }
     }
 }

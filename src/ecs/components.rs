@@ -118,9 +118,12 @@ impl_reflect!(
 #[reflect(Component, Default, Debug)]
 #[require(SoftBodyStatus, crate::ecs::plugin::BodySim)]
 pub struct SoftBody {
-    /// The time integrator.
+    /// The time integrator. Default: [`IntegratorKind::Auto`], which picks the cheapest
+    /// method and substep count that are stable for this body at the frame's length (and
+    /// meet [`AutoSettings`]' tolerance, when one is set), and says why in [`SoftBodyStatus`].
     pub integrator: IntegratorKind,
-    /// How the substep `h` is chosen; substeps land exactly on the fixed frame's end.
+    /// How the substep `h` is chosen; substeps land exactly on the fixed frame's end. Ignored
+    /// under [`IntegratorKind::Auto`], which chooses the substeps itself.
     pub step: StepPolicy,
     /// Viscous drag `−c v` on every free particle (N·s/m).
     pub drag: f32,
@@ -136,7 +139,7 @@ pub struct SoftBody {
 impl Default for SoftBody {
     fn default() -> Self {
         Self {
-            integrator: IntegratorKind::Rk4,
+            integrator: IntegratorKind::Auto,
             step: StepPolicy::Fixed { h: 1.0 / 240.0 },
             drag: 0.0,
             gravity: None,
