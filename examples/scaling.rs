@@ -162,69 +162,61 @@ impl headless::Chart for ScalingChart<'_> {
     where
         DB::ErrorType: 'static,
     {
-        chart(root, self.0, self.1)
-    }
-}
-
-fn chart<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    rows: &Rows,
-    slopes: &[(IntegratorKind, Option<f64>)],
-) -> Result<(), Box<dyn std::error::Error>>
-where
-    DB::ErrorType: 'static,
-{
-    root.fill(&WHITE)?;
-    let (x0, x1) = rows.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
-        (a.min(r.1 as f64), b.max(r.1 as f64))
-    });
-    let (y0, y1) = rows
-        .iter()
-        .fold((f64::MAX, 0.0f64), |(a, b), r| (a.min(r.3), b.max(r.3)));
-    let mut c = ChartBuilder::on(&root)
-        .caption(
-            format!("cost per simulated second at each method's largest stable h ({PRECISION})"),
-            ("sans-serif", 20),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(
-            (x0 / 1.5..x1 * 1.5).log_scale(),
-            (y0 / 2.0..y1 * 2.0).log_scale(),
-        )?;
-    c.configure_mesh()
-        .x_desc("particles")
-        .y_desc("ms of wall time per simulated second")
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.0}"))
-        .draw()?;
-    for (i, (kind, slope)) in slopes.iter().enumerate() {
-        let color = headless::PALETTE[i % headless::PALETTE.len()];
-        let pts: Vec<(f64, f64)> = rows
+        let (rows, slopes) = (self.0, self.1);
+        root.fill(&WHITE)?;
+        let (x0, x1) = rows.iter().fold((f64::MAX, 0.0f64), |(a, b), r| {
+            (a.min(r.1 as f64), b.max(r.1 as f64))
+        });
+        let (y0, y1) = rows
             .iter()
-            .filter(|r| r.0 == *kind)
-            .map(|r| (r.1 as f64, r.3))
-            .collect();
-        if pts.is_empty() {
-            continue;
+            .fold((f64::MAX, 0.0f64), |(a, b), r| (a.min(r.3), b.max(r.3)));
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "cost per simulated second at each method's largest stable h ({PRECISION})"
+                ),
+                ("sans-serif", 20),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (x0 / 1.5..x1 * 1.5).log_scale(),
+                (y0 / 2.0..y1 * 2.0).log_scale(),
+            )?;
+        c.configure_mesh()
+            .x_desc("particles")
+            .y_desc("ms of wall time per simulated second")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
+            .draw()?;
+        for (i, (kind, slope)) in slopes.iter().enumerate() {
+            let color = headless::PALETTE[i % headless::PALETTE.len()];
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.0 == *kind)
+                .map(|r| (r.1 as f64, r.3))
+                .collect();
+            if pts.is_empty() {
+                continue;
+            }
+            c.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                .label(format!(
+                    "{} (slope {})",
+                    kind.label(),
+                    slope.map_or("—".into(), |s| format!("{s:.2}"))
+                ))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                });
+            c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
         }
-        c.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
-            .label(format!(
-                "{} (slope {})",
-                kind.label(),
-                slope.map_or("—".into(), |s| format!("{s:.2}"))
-            ))
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-            });
-        c.draw_series(pts.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }

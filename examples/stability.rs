@@ -118,83 +118,74 @@ impl headless::Chart for StabilityChart<'_> {
     where
         DB::ErrorType: 'static,
     {
-        chart(root, self.0)
-    }
-}
-
-fn chart<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    rows: &[Row],
-) -> Result<(), Box<dyn std::error::Error>>
-where
-    DB::ErrorType: 'static,
-{
-    root.fill(&WHITE)?;
-    let kinds: Vec<IntegratorKind> = IntegratorKind::ALL
-        .into_iter()
-        .filter(|k| !k.is_adaptive())
-        .collect();
-    let mut c = ChartBuilder::on(&root)
-        .caption(
-            format!(
-                "largest stable h·ω_max ({PRECISION}); bars: undamped theory; implicit methods (i d b x p) tried up to h = 1/60 s"
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(12)
-        .x_label_area_size(60)
-        .y_label_area_size(60)
-        .build_cartesian_2d(
-            -0.5f64..kinds.len() as f64 - 0.5,
-            (0.01f64..1000.0).log_scale(),
-        )?;
-    c.configure_mesh()
-        .x_labels(kinds.len())
-        .x_label_formatter(&|x| {
-            let i = x.round() as usize;
-            kinds
-                .get(i)
-                .map_or(String::new(), |k| k.letter().to_string())
-        })
-        .x_desc("method (e s t m r i d b x p)")
-        .y_desc("h · ω_max")
-        .draw()?;
-    let colors = [
-        RGBColor(55, 126, 184),
-        RGBColor(228, 26, 28),
-        RGBColor(77, 175, 74),
-    ];
-    for (si, scene) in StabilityScene::ALL.iter().enumerate() {
-        let color = colors[si];
-        let pts: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|r| r.scene == *scene)
-            .filter_map(|r| {
-                let i = kinds.iter().position(|k| *k == r.kind)? as f64;
-                r.measured
-                    .map(|h| (i + (si as f64 - 1.0) * 0.15, h * r.omega))
-            })
+        let rows = self.0;
+        root.fill(&WHITE)?;
+        let kinds: Vec<IntegratorKind> = IntegratorKind::ALL
+            .into_iter()
+            .filter(|k| !k.is_adaptive())
             .collect();
-        c.draw_series(pts.iter().map(|p| Circle::new(*p, 5, color.filled())))?
-            .label(format!("{} measured", scene.name()))
-            .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "largest stable h·ω_max ({PRECISION}); bars: undamped theory; implicit methods (i d b x p) tried up to h = 1/60 s"
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(60)
+            .y_label_area_size(60)
+            .build_cartesian_2d(
+                -0.5f64..kinds.len() as f64 - 0.5,
+                (0.01f64..1000.0).log_scale(),
+            )?;
+        c.configure_mesh()
+            .x_labels(kinds.len())
+            .x_label_formatter(&|x| {
+                let i = x.round() as usize;
+                kinds
+                    .get(i)
+                    .map_or(String::new(), |k| k.letter().to_string())
+            })
+            .x_desc("method (e s t m r i d b x p)")
+            .y_desc("h · ω_max")
+            .draw()?;
+        let colors = [
+            RGBColor(55, 126, 184),
+            RGBColor(228, 26, 28),
+            RGBColor(77, 175, 74),
+        ];
+        for (si, scene) in StabilityScene::ALL.iter().enumerate() {
+            let color = colors[si];
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.scene == *scene)
+                .filter_map(|r| {
+                    let i = kinds.iter().position(|k| *k == r.kind)? as f64;
+                    r.measured
+                        .map(|h| (i + (si as f64 - 1.0) * 0.15, h * r.omega))
+                })
+                .collect();
+            c.draw_series(pts.iter().map(|p| Circle::new(*p, 5, color.filled())))?
+                .label(format!("{} measured", scene.name()))
+                .legend(move |(x, y)| Circle::new((x, y), 5, color.filled()));
+        }
+        // Theory: 2 (symplectic Euler) and 2√2 (RK4), as short black bars at their method.
+        for (k, bound) in [
+            (IntegratorKind::SymplecticEuler, 2.0),
+            (IntegratorKind::Rk4, 2.0 * std::f64::consts::SQRT_2),
+        ] {
+            let i = kinds.iter().position(|x| *x == k).unwrap_or(0) as f64;
+            c.draw_series(LineSeries::new(
+                vec![(i - 0.35, bound), (i + 0.35, bound)],
+                BLACK.stroke_width(3),
+            ))?;
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
     }
-    // Theory: 2 (symplectic Euler) and 2√2 (RK4), as short black bars at their method.
-    for (k, bound) in [
-        (IntegratorKind::SymplecticEuler, 2.0),
-        (IntegratorKind::Rk4, 2.0 * std::f64::consts::SQRT_2),
-    ] {
-        let i = kinds.iter().position(|x| *x == k).unwrap_or(0) as f64;
-        c.draw_series(LineSeries::new(
-            vec![(i - 0.35, bound), (i + 0.35, bound)],
-            BLACK.stroke_width(3),
-        ))?;
-    }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }

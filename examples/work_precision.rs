@@ -229,84 +229,76 @@ impl headless::Chart for ResolutionChart<'_> {
     where
         DB::ErrorType: 'static,
     {
-        resolution_chart(root, self.0, self.1)
-    }
-}
-
-fn resolution_chart<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    rows: &CostRows,
-    particles: &[usize],
-) -> Result<(), Box<dyn std::error::Error>>
-where
-    DB::ErrorType: 'static,
-{
-    let all: Vec<f64> = rows
-        .iter()
-        .flat_map(|(_, c)| c.iter().flatten().map(|(ms, _)| *ms))
-        .collect();
-    let (y0, y1) = all
-        .iter()
-        .fold((f64::MAX, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
-    let (y0, y1) = if all.is_empty() {
-        (1.0, 10.0)
-    } else {
-        (y0 / 2.0, y1 * 2.0)
-    };
-    let (x0, x1) = (
-        *particles.first().unwrap_or(&1) as f64 / 1.5,
-        *particles.last().unwrap_or(&1) as f64 * 1.5,
-    );
-    root.fill(&WHITE)?;
-    let mut c = ChartBuilder::on(&root)
-        .caption(
-            format!("cloth: cost to reach {TARGET:.0e} m at T = 0.5 s ({PRECISION})"),
-            ("sans-serif", 22),
-        )
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
-    c.configure_mesh()
-        .x_desc("particles (hollow: upper bound, met at the largest stable step)")
-        .y_desc("wall ms per simulated second (one core)")
-        .x_label_formatter(&|v| format!("{v:.0}"))
-        .y_label_formatter(&|v| format!("{v:.1}"))
-        .draw()?;
-    for (i, (kind, costs)) in rows.iter().enumerate() {
-        let marked: Vec<((f64, f64), bool)> = costs
+        let (rows, particles) = (self.0, self.1);
+        let all: Vec<f64> = rows
             .iter()
-            .zip(particles)
-            .filter_map(|(c, n)| c.map(|(ms, bound)| ((*n as f64, ms), bound)))
+            .flat_map(|(_, c)| c.iter().flatten().map(|(ms, _)| *ms))
             .collect();
-        if marked.is_empty() {
-            continue;
+        let (y0, y1) = all
+            .iter()
+            .fold((f64::MAX, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
+        let (y0, y1) = if all.is_empty() {
+            (1.0, 10.0)
+        } else {
+            (y0 / 2.0, y1 * 2.0)
+        };
+        let (x0, x1) = (
+            *particles.first().unwrap_or(&1) as f64 / 1.5,
+            *particles.last().unwrap_or(&1) as f64 * 1.5,
+        );
+        root.fill(&WHITE)?;
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!("cloth: cost to reach {TARGET:.0e} m at T = 0.5 s ({PRECISION})"),
+                ("sans-serif", 22),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+        c.configure_mesh()
+            .x_desc("particles (hollow: upper bound, met at the largest stable step)")
+            .y_desc("wall ms per simulated second (one core)")
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.1}"))
+            .draw()?;
+        for (i, (kind, costs)) in rows.iter().enumerate() {
+            let marked: Vec<((f64, f64), bool)> = costs
+                .iter()
+                .zip(particles)
+                .filter_map(|(c, n)| c.map(|(ms, bound)| ((*n as f64, ms), bound)))
+                .collect();
+            if marked.is_empty() {
+                continue;
+            }
+            let color = headless::PALETTE[i % headless::PALETTE.len()];
+            c.draw_series(LineSeries::new(
+                marked.iter().map(|m| m.0),
+                color.stroke_width(2),
+            ))?
+            .label(kind.label())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+            });
+            // Filled: interpolated to the target; hollow: an upper bound (the largest stable step
+            // already meets it).
+            c.draw_series(marked.iter().map(|(p, bound)| {
+                let style = if *bound {
+                    color.stroke_width(2)
+                } else {
+                    color.filled()
+                };
+                Circle::new(*p, 4, style)
+            }))?;
         }
-        let color = headless::PALETTE[i % headless::PALETTE.len()];
-        c.draw_series(LineSeries::new(
-            marked.iter().map(|m| m.0),
-            color.stroke_width(2),
-        ))?
-        .label(kind.label())
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2)));
-        // Filled: interpolated to the target; hollow: an upper bound (the largest stable step
-        // already meets it).
-        c.draw_series(marked.iter().map(|(p, bound)| {
-            let style = if *bound {
-                color.stroke_width(2)
-            } else {
-                color.filled()
-            };
-            Circle::new(*p, 4, style)
-        }))?;
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
     }
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()?;
-    root.present()?;
-    Ok(())
 }
 
 /// One problem's sweep, ready to print and chart.
@@ -437,6 +429,13 @@ struct WorkChart<'a> {
     orders: &'a [(IntegratorKind, Option<f64>)],
 }
 
+struct Frame {
+    title: String,
+    x: (f64, f64),
+    y: (f64, f64),
+    cost: Cost,
+}
+
 impl headless::Chart for WorkChart<'_> {
     fn draw<DB: DrawingBackend>(
         &self,
@@ -445,77 +444,59 @@ impl headless::Chart for WorkChart<'_> {
     where
         DB::ErrorType: 'static,
     {
-        draw(root, &self.frame, self.points, self.orders)
-    }
-}
-
-struct Frame {
-    title: String,
-    x: (f64, f64),
-    y: (f64, f64),
-    cost: Cost,
-}
-
-fn draw<DB: DrawingBackend>(
-    root: DrawingArea<DB, plotters::coord::Shift>,
-    frame: &Frame,
-    points: &[WorkPoint],
-    orders: &[(IntegratorKind, Option<f64>)],
-) -> Result<(), Box<dyn std::error::Error>>
-where
-    DB::ErrorType: 'static,
-{
-    let (x0, x1) = frame.x;
-    let (y0, y1) = frame.y;
-    let title = &frame.title;
-    {
-        root.fill(&WHITE)?;
-        let mut c = ChartBuilder::on(&root)
-            .caption(title.as_str(), ("sans-serif", 22))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d((x0 / 1.5..x1 * 1.5).log_scale(), (y0..y1).log_scale())?;
-        c.configure_mesh()
-            .x_desc(frame.cost.label())
-            .y_desc("max position error (m)")
-            .x_label_formatter(&|v| format!("{v:.3}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
-            .draw()?;
-        for (i, kind) in IntegratorKind::ALL.iter().enumerate() {
-            let pts: Vec<&WorkPoint> = points.iter().filter(|p| p.method == *kind).collect();
-            if pts.is_empty() {
-                continue;
+        let (frame, points, orders) = (&self.frame, self.points, self.orders);
+        let (x0, x1) = frame.x;
+        let (y0, y1) = frame.y;
+        let title = &frame.title;
+        {
+            root.fill(&WHITE)?;
+            let mut c = ChartBuilder::on(&root)
+                .caption(title.as_str(), ("sans-serif", 22))
+                .margin(12)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d((x0 / 1.5..x1 * 1.5).log_scale(), (y0..y1).log_scale())?;
+            c.configure_mesh()
+                .x_desc(frame.cost.label())
+                .y_desc("max position error (m)")
+                .x_label_formatter(&|v| format!("{v:.3}"))
+                .y_label_formatter(&|v| format!("{v:.0e}"))
+                .draw()?;
+            for (i, kind) in IntegratorKind::ALL.iter().enumerate() {
+                let pts: Vec<&WorkPoint> = points.iter().filter(|p| p.method == *kind).collect();
+                if pts.is_empty() {
+                    continue;
+                }
+                let color = headless::PALETTE[i % headless::PALETTE.len()];
+                let order = orders
+                    .iter()
+                    .find(|o| o.0 == *kind)
+                    .and_then(|o| o.1)
+                    .map_or(String::new(), |p| format!(" (p = {p:.2})"));
+                let line: Vec<(f64, f64)> = pts
+                    .iter()
+                    .filter_map(|p| p.error.map(|e| (frame.cost.of(p), e.max(1e-16))))
+                    .collect();
+                c.draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))?
+                    .label(format!("{}{order}", kind.label()))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
+                    });
+                c.draw_series(line.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
+                // Diverged runs: crosses on the top edge at their cost.
+                c.draw_series(
+                    pts.iter().filter(|p| p.error.is_none()).map(|p| {
+                        Cross::new((frame.cost.of(p), y1 / 1.5), 5, color.stroke_width(2))
+                    }),
+                )?;
             }
-            let color = headless::PALETTE[i % headless::PALETTE.len()];
-            let order = orders
-                .iter()
-                .find(|o| o.0 == *kind)
-                .and_then(|o| o.1)
-                .map_or(String::new(), |p| format!(" (p = {p:.2})"));
-            let line: Vec<(f64, f64)> = pts
-                .iter()
-                .filter_map(|p| p.error.map(|e| (frame.cost.of(p), e.max(1e-16))))
-                .collect();
-            c.draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))?
-                .label(format!("{}{order}", kind.label()))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 16, y)], color.stroke_width(2))
-                });
-            c.draw_series(line.iter().map(|p| Circle::new(*p, 3, color.filled())))?;
-            // Diverged runs: crosses on the top edge at their cost.
-            c.draw_series(
-                pts.iter()
-                    .filter(|p| p.error.is_none())
-                    .map(|p| Cross::new((frame.cost.of(p), y1 / 1.5), 5, color.stroke_width(2))),
-            )?;
+            c.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .position(SeriesLabelPosition::LowerLeft)
+                .draw()?;
+            root.present()?;
+            Ok(())
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::LowerLeft)
-            .draw()?;
-        root.present()?;
-        Ok(())
     }
 }
