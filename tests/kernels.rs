@@ -137,6 +137,11 @@ fn row_kernel_survives_edits_and_small_bodies() {
 /// A 10×10×10-cell box (6000 tets) deformed at random, with a few elements pushed flat or
 /// inverted, as an explicit step or a drag can leave them.
 fn deformed_box(seed: u64) -> (Tets, Vec<Vector>) {
+    box_with(seed, 20)
+}
+
+/// The box of [`deformed_box`] with `wild` particles moved onto others.
+fn box_with(seed: u64, wild: usize) -> (Tets, Vec<Vector>) {
     let mesh = TetMesh::tet_box([0.1, 0.1, 0.1], [10, 10, 10]).unwrap();
     let material = NeoHookean {
         young: 1e5,
@@ -157,7 +162,7 @@ fn deformed_box(seed: u64) -> (Tets, Vec<Vector>) {
     for xi in x.iter_mut() {
         *xi += random_vec(&mut r, 0.003);
     }
-    for k in 0..20 {
+    for k in 0..wild {
         let i = r.below(x.len());
         x[i] = x[(i + 1 + k) % x.len()];
     }
@@ -193,6 +198,44 @@ fn tet_kernel_equals_the_f64_reference_to_round_off() {
     let bound = 64.0 * EPS as f64 + 64.0 * f64::EPSILON * amplification;
     println!("worst |fast − reference| / S = {err:.2e} (bound {bound:.1e})");
     assert!(err <= bound, "{err:e}");
+}
+
+/// The tets' energy from the fast kernel's layout (the divergence guard's), against the f64
+/// reference: each element's `ψ = C (J^(−2/3) I₁ − 3) + D (J − 1)²` to a few dozen roundings of
+/// its terms' magnitudes, `J`'s own round-off being `u |f_a| |f_b| |f_c|` (Hadamard's bound)
+/// times `2 D |J − 1|` and the isochoric term's sensitivity to it. On the box deformed by 3 mm
+/// per particle that scale is about ten times the energy itself, so an error of the energy's
+/// size fails by four orders; with the flattened and inverted elements too it still holds.
+#[test]
+fn tet_energy_equals_the_f64_reference_to_round_off() {
+    for wild in [0, 20] {
+        let (tets, x) = box_with(7, wild);
+        let mut scale = 0.0;
+        for t in tets.as_slice() {
+            let xs = t.v.map(|i| DVec3::from_array(x[i as usize].to_f64()));
+            let f = t.rest.deformation_gradient(xs);
+            let (j, c, d) = (f.determinant(), t.material.c, t.material.d);
+            let i1 =
+                f.x_axis.length_squared() + f.y_axis.length_squared() + f.z_axis.length_squared();
+            let a23 = j.max(0.1).powf(-2.0 / 3.0);
+            let hadamard = f.x_axis.length() * f.y_axis.length() * f.z_axis.length();
+            let sensitivity = 2.0 * d * (j - 1.0).abs() + c * a23 * i1 / j.max(0.1);
+            scale += t.rest.volume
+                * (c * (a23 * i1 + 3.0) + d * (j - 1.0).powi(2) + sensitivity * hadamard);
+        }
+        let (fast, reference) = (tets.energy_fast(&x), tets.energy(&x));
+        let err = (fast - reference).abs() / scale;
+        let bound = 64.0 * EPS as f64 + 64.0 * f64::EPSILON * 2.3 / 0.01;
+        println!(
+            "{wild} wild particles: fast {fast:.9e} J, reference {reference:.9e} J, \
+             scale {scale:.3e} J, |difference| / scale = {err:.2e} (bound {bound:.1e})"
+        );
+        assert!(err <= bound, "{err:e}");
+        assert!(
+            wild > 0 || scale < 20.0 * reference,
+            "the scale must stay near the energy"
+        );
+    }
 }
 
 #[cfg(feature = "parallel")]

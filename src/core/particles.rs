@@ -598,7 +598,13 @@ impl OdeSystem<ParticleState> for ParticleModel {
         } else {
             0.0
         };
-        (k - k_cm).max(0.0) + self.elastic_energy(&state.x)
+        // The tets' energy from the fast kernel: the reference's f64 element loop was 8 % of an
+        // explicit step on a 5000-tet box, at one check every 64 substeps.
+        let mut elastic = self.springs.energy(&state.x);
+        if !self.tets.is_empty() {
+            elastic += self.tets.energy_fast(&state.x) as Scalar;
+        }
+        (k - k_cm).max(0.0) + elastic
     }
 
     /// Kinetic plus elastic energy now, plus the work gravity and external forces could do

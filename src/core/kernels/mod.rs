@@ -18,6 +18,52 @@
 pub mod springs;
 pub mod tets;
 
+/// AVX helpers shared by the f32 kernels.
+#[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+pub(crate) mod avx {
+    use std::arch::x86_64::*;
+
+    /// The 4×4 transpose of each 128-bit half of `(a, b, c, d)`. From eight 4-lane rows
+    /// (`a` = rows 0 and 4, `b` = rows 1 and 5, …) it gives the four 8-lane columns; from four
+    /// 8-lane columns it gives the rows back, row `q` in the low half of the `q % 4`-th
+    /// register for `q < 4` and in the high half for `q ≥ 4`.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn transpose(a: __m256, b: __m256, c: __m256, d: __m256) -> [__m256; 4] {
+        let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpacklo_ps(c, d));
+        let (t2, t3) = (_mm256_unpackhi_ps(a, b), _mm256_unpackhi_ps(c, d));
+        let lo = |p: __m256, q: __m256| {
+            _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
+        };
+        let hi = |p: __m256, q: __m256| {
+            _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
+        };
+        [lo(t0, t1), hi(t0, t1), lo(t2, t3), hi(t2, t3)]
+    }
+
+    /// Eight 4-lane rows to four 8-lane columns (x, y, z, w of eight vectors).
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn columns(r: &[__m128; 8]) -> [__m256; 4] {
+        transpose(
+            _mm256_set_m128(r[4], r[0]),
+            _mm256_set_m128(r[5], r[1]),
+            _mm256_set_m128(r[6], r[2]),
+            _mm256_set_m128(r[7], r[3]),
+        )
+    }
+
+    /// Three 8-lane columns (x, y, z) to eight 4-lane rows with `w = 0`.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn rows(x: __m256, y: __m256, z: __m256) -> [__m128; 8] {
+        let t = transpose(x, y, z, _mm256_setzero_ps());
+        let lo = |q: usize| _mm256_castps256_ps128(t[q]);
+        let hi = |q: usize| _mm256_extractf128_ps::<1>(t[q]);
+        [lo(0), lo(1), lo(2), lo(3), hi(0), hi(1), hi(2), hi(3)]
+    }
+}
+
 /// Runs `job(c)` for every chunk `c` in `0..chunks`: on the rayon pool the caller runs on
 /// (see [`with_threads`]) when the `parallel` feature is on, the caller is one of that pool's
 /// threads and there is more than one chunk; one after another otherwise. Jobs must write

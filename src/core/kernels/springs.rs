@@ -286,28 +286,8 @@ impl SpringRows {
         v: Option<&[Vector]>,
         out: Out,
     ) {
+        use super::avx::columns;
         use std::arch::x86_64::*;
-        // Eight 4-lane rows (x, y, z, w of eight vectors) to four 8-lane columns: rows q and
-        // q + 4 share a 256-bit register, then the 4×4 transpose runs in both halves at once.
-        #[inline(always)]
-        fn transpose(r: &[__m128; 8]) -> [__m256; 4] {
-            // SAFETY: only inlined into `walk_avx`, which enables AVX.
-            unsafe {
-                let a = _mm256_set_m128(r[4], r[0]);
-                let b = _mm256_set_m128(r[5], r[1]);
-                let c = _mm256_set_m128(r[6], r[2]);
-                let d = _mm256_set_m128(r[7], r[3]);
-                let (t0, t1) = (_mm256_unpacklo_ps(a, b), _mm256_unpacklo_ps(c, d));
-                let (t2, t3) = (_mm256_unpackhi_ps(a, b), _mm256_unpackhi_ps(c, d));
-                let lo = |p: __m256, q: __m256| {
-                    _mm256_castpd_ps(_mm256_unpacklo_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
-                };
-                let hi = |p: __m256, q: __m256| {
-                    _mm256_castpd_ps(_mm256_unpackhi_pd(_mm256_castps_pd(p), _mm256_castps_pd(q)))
-                };
-                [lo(t0, t1), hi(t0, t1), lo(t2, t3), hi(t2, t3)]
-            }
-        }
         // SAFETY: `st.s + 7 < s1 ≤ cols.len()`; particle indices below the bound the caller
         // guarantees; `Vec3A` is one `__m128`.
         unsafe {
@@ -323,9 +303,9 @@ impl SpringRows {
                         - *a.get_unchecked((*cols.add(q)).j as usize)
                 };
                 let d: [Vector; 8] = std::array::from_fn(|q| diff(x, q));
-                let [dx, dy, dz, _] = transpose(&d.map(Into::into));
+                let [dx, dy, dz, _] = columns(&d.map(Into::into));
                 // (j, rest, k, damping) of eight springs, transposed.
-                let [_, rest, k, damping] = transpose(&std::array::from_fn(|q| {
+                let [_, rest, k, damping] = columns(&std::array::from_fn(|q| {
                     _mm_loadu_ps(cols.add(q) as *const f32)
                 }));
                 let dd = _mm256_add_ps(
@@ -337,7 +317,7 @@ impl SpringRows {
                 let coef = match v {
                     Some(v) => {
                         let w: [__m128; 8] = std::array::from_fn(|q| diff(v, q).into());
-                        let [wx, wy, wz, _] = transpose(&w);
+                        let [wx, wy, wz, _] = columns(&w);
                         let inv = _mm256_and_ps(_mm256_div_ps(one, l), pos);
                         let along = _mm256_mul_ps(
                             _mm256_add_ps(
