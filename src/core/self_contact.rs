@@ -537,6 +537,8 @@ impl SelfContact {
         s.broad_at = u64::MAX;
         s.moved_all = true;
         s.moved_mark.resize(n, false);
+        // Each vertex is listed at most once: sized now, a pass never grows it.
+        s.moved.reserve(n.saturating_sub(s.moved.len()));
         for &i in &self.surface.vertices {
             let i = i as usize;
             let p0 = to_d(x0[i]);

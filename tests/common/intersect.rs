@@ -240,3 +240,69 @@ pub fn closest_approach(x: &[P], tris: &[[u32; 3]], within: f64) -> f64 {
     }
     best
 }
+
+/// Distance between segments `p1 q1` and `p2 q2` (Ericson, *Real-Time Collision Detection*,
+/// §5.1.9: the closest points' parameters, clamped to the segments).
+pub fn segment_distance(p1: P, q1: P, p2: P, q2: P) -> f64 {
+    let (d1, d2, r) = (sub(q1, p1), sub(q2, p2), sub(p1, p2));
+    let (a, e, f) = (dot(d1, d1), dot(d2, d2), dot(d2, r));
+    let (s, t) = if a <= 1e-300 && e <= 1e-300 {
+        (0.0, 0.0)
+    } else if a <= 1e-300 {
+        (0.0, (f / e).clamp(0.0, 1.0))
+    } else {
+        let c = dot(d1, r);
+        if e <= 1e-300 {
+            ((-c / a).clamp(0.0, 1.0), 0.0)
+        } else {
+            let b = dot(d1, d2);
+            let denom = a * e - b * b;
+            let mut s = if denom > 0.0 {
+                ((b * f - c * e) / denom).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let mut t = (b * s + f) / e;
+            if t < 0.0 {
+                t = 0.0;
+                s = (-c / a).clamp(0.0, 1.0);
+            } else if t > 1.0 {
+                t = 1.0;
+                s = ((b - c) / a).clamp(0.0, 1.0);
+            }
+            (s, t)
+        }
+    };
+    let c1 = [p1[0] + d1[0] * s, p1[1] + d1[1] * s, p1[2] + d1[2] * s];
+    let c2 = [p2[0] + d2[0] * t, p2[1] + d2[1] * t, p2[2] + d2[2] * t];
+    dot(sub(c1, c2), sub(c1, c2)).sqrt()
+}
+
+/// The smallest distance between two edges of the surface that share no particle, among
+/// pairs closer than `within` (infinity when none is).
+pub fn closest_edge_approach(x: &[P], tris: &[[u32; 3]], within: f64) -> f64 {
+    let mut edges: Vec<[u32; 2]> = tris
+        .iter()
+        .flat_map(|t| [[t[0], t[1]], [t[1], t[2]], [t[2], t[0]]])
+        .map(|[a, b]| [a.min(b), a.max(b)])
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    let lo = |e: &[u32; 2]| x[e[0] as usize][0].min(x[e[1] as usize][0]);
+    let hi = |e: &[u32; 2]| x[e[0] as usize][0].max(x[e[1] as usize][0]);
+    edges.sort_by(|a, b| lo(a).total_cmp(&lo(b)));
+    let mut best = f64::INFINITY;
+    for (k, e) in edges.iter().enumerate() {
+        for f in &edges[k + 1..] {
+            if lo(f) > hi(e) + within {
+                break;
+            }
+            if f.contains(&e[0]) || f.contains(&e[1]) {
+                continue;
+            }
+            let p = |i: u32| x[i as usize];
+            best = best.min(segment_distance(p(e[0]), p(e[1]), p(f[0]), p(f[1])));
+        }
+    }
+    best
+}
