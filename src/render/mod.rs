@@ -51,8 +51,9 @@ impl Default for SoftBodySurface {
 /// interpolated, and so are the simulated surface's smooth normals (Phong shading).
 ///
 /// With [`SelfCollision`](crate::ecs::SelfCollision), offsets are clamped to a quarter of its
-/// thickness (or `max_offset`, if smaller): parts the simulation keeps half a thickness apart
-/// stay apart on screen. With `far`, a body farther than that from every 3D camera is drawn as
+/// thickness (or `max_offset`, if smaller), so parts the simulation keeps half a thickness
+/// apart stay apart on screen, and the rounding fades out where the surface folds back on
+/// itself (see [`core::detail`](crate::core::detail)). With `far`, a body farther than that from every 3D camera is drawn as
 /// simulated (level 1), with 10 % hysteresis so it does not flicker at the boundary.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Debug)]
