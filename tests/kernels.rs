@@ -86,10 +86,9 @@ fn worst(a: &[Vector], b: &[Vector], scale: &[f64]) -> f64 {
 #[test]
 fn row_kernel_equals_the_reference_to_round_off() {
     for (seed, damped) in [(1, false), (2, true), (3, true)] {
-        // 20,000 springs: five chunks, with spills between them.
+        // 20,000 springs: five chunks of the force pass; 3000 particles: three of the gather.
         let (s, x, v) = network(seed, 3000, 20_000, damped);
         assert!(s.rows().chunks() >= 4, "{} chunks", s.rows().chunks());
-        assert!(s.rows().spills() > 0);
         let mut fast = vec![Vector::ZERO; x.len()];
         let mut reference = fast.clone();
         s.accumulate(&x, &v, &mut fast);
