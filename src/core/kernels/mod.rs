@@ -10,10 +10,12 @@
 //! - **A step allocates nothing.** Layouts and their scratch buffers are built once, on the
 //!   first evaluation after the topology changed.
 //!
-//! [`springs`] groups springs into rows by their lower particle index (each row's force on its
-//! particle is summed in a register, which breaks the store-to-load chain of the one-loop
-//! kernel); [`tets`] evaluates neo-Hookean elements in the build's precision with their rest
-//! shapes precomputed, and gathers each vertex's forces over its elements.
+//! Both work in two passes: first every element's forces (a spring's on its lower particle,
+//! a tet's on its four) into its own slots, several elements at a time in AVX lanes where the
+//! processor has it; then every particle sums its slots in a fixed order. [`springs`] keeps
+//! springs in rows by their lower particle index, so a particle's own row is contiguous;
+//! [`tets`] evaluates neo-Hookean elements in the build's precision with their rest shapes
+//! precomputed.
 
 pub mod springs;
 pub mod tets;
