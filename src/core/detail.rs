@@ -276,16 +276,13 @@ impl Tessellation {
     pub fn coarse_normals(&self, x: &[Vec3]) -> Vec<Vec3> {
         let mut normals = vec![Vec3::ZERO; x.len()];
         let mut area = vec![0.0f32; x.len()];
-        for t in &self.coarse {
-            let [a, b, c] = t.map(|i| x[i as usize]);
-            // The cross product's length is twice the area: larger triangles weigh more.
-            let n = (b - a).cross(c - a);
+        for_each_face_normal(x, &self.coarse, |t, n| {
             let len = n.length();
             for &i in t {
                 normals[i as usize] += n;
                 area[i as usize] += len;
             }
-        }
+        });
         for (n, a) in normals.iter_mut().zip(area) {
             *n = if a > 0.0 && a.is_finite() {
                 *n / a
@@ -349,16 +346,22 @@ impl Tessellation {
 /// touches a vertex). `normals` is as long as `x`.
 pub fn vertex_normals(x: &[Vec3], triangles: &[[u32; 3]], normals: &mut [Vec3]) {
     normals.fill(Vec3::ZERO);
-    for t in triangles {
-        let [a, b, c] = t.map(|i| x[i as usize]);
-        // The cross product's length is twice the area: larger triangles weigh more.
-        let n = (b - a).cross(c - a);
+    for_each_face_normal(x, triangles, |t, n| {
         for &i in t {
             normals[i as usize] += n;
         }
-    }
+    });
     for n in normals.iter_mut() {
         *n = n.try_normalize().unwrap_or(Vec3::Y);
+    }
+}
+
+/// Calls `f(triangle, n)` for every triangle, `n` its normal with twice its area as length (so
+/// that sums over the triangles at a vertex weigh larger ones more).
+fn for_each_face_normal(x: &[Vec3], triangles: &[[u32; 3]], mut f: impl FnMut(&[u32; 3], Vec3)) {
+    for t in triangles {
+        let [a, b, c] = t.map(|i| x[i as usize]);
+        f(t, (b - a).cross(c - a));
     }
 }
 

@@ -284,15 +284,8 @@ fn inv_cbrt_lanes(x: lane::L) -> lane::L {
     use lane::*;
     let mut a = [0.0; W];
     store(x, &mut a);
-    #[cfg(not(feature = "f64"))]
-    let (est, steps) = (a.map(|v| f32::from_bits(0x54a2_fa8c - v.to_bits() / 3)), 3);
-    #[cfg(feature = "f64")]
-    let (est, steps) = (
-        a.map(|v| f64::from_bits(0x553e_f0ff_289d_d796 - v.to_bits() / 3)),
-        4,
-    );
-    let mut y = load_unaligned(&est);
-    for _ in 0..steps {
+    let mut y = load_unaligned(&a.map(inv_cbrt_estimate));
+    for _ in 0..INV_CBRT_STEPS {
         let xyyy = mul(mul(mul(x, y), y), y);
         y = mul(y, mul(sub(splat(4.0), xyyy), splat(1.0 / 3.0)));
     }
@@ -548,14 +541,23 @@ unsafe fn deformation(e: &Element, x: &[Vector]) -> [Vector; 3] {
 /// was a third of the element kernel's time.
 #[inline(always)]
 pub fn inv_cbrt(x: Scalar) -> Scalar {
-    #[cfg(not(feature = "f64"))]
-    let (mut y, steps) = (f32::from_bits(0x54a2_fa8c - x.to_bits() / 3), 3);
-    #[cfg(feature = "f64")]
-    let (mut y, steps) = (f64::from_bits(0x553e_f0ff_289d_d796 - x.to_bits() / 3), 4);
-    for _ in 0..steps {
+    let mut y = inv_cbrt_estimate(x);
+    for _ in 0..INV_CBRT_STEPS {
         y *= (4.0 - x * y * y * y) * (1.0 / 3.0);
     }
     y
+}
+
+/// Newton steps [`inv_cbrt`] takes from [`inv_cbrt_estimate`].
+const INV_CBRT_STEPS: usize = if cfg!(feature = "f64") { 4 } else { 3 };
+
+/// [`inv_cbrt`]'s first estimate, from the exponent bits (within 3 %).
+#[inline(always)]
+fn inv_cbrt_estimate(x: Scalar) -> Scalar {
+    #[cfg(not(feature = "f64"))]
+    return f32::from_bits(0x54a2_fa8c - x.to_bits() / 3);
+    #[cfg(feature = "f64")]
+    return f64::from_bits(0x553e_f0ff_289d_d796 - x.to_bits() / 3);
 }
 
 impl Clone for TetForces {
