@@ -8,6 +8,7 @@
 mod common;
 
 use bevy_soft_body::core::build::{ClothParams, ClothPins, cloth};
+use bevy_soft_body::core::fem::mesh::TetMesh;
 use bevy_soft_body::core::scene::MotionDesc;
 use bevy_soft_body::core::tear::{TearParams, tear_scene};
 use bevy_soft_body::prelude::*;
@@ -217,12 +218,288 @@ fn a_tearing_limit_that_is_not_positive_names_the_field() {
     assert!(parsed.build().is_err());
 }
 
+/// A bar of tets, 1.2 m × 0.1 m × 0.1 m in 12 cubes of six tets, lying without gravity; its
+/// end faces are pulled apart at 0.5 m/s each. The tets of the seventh cube (x from 0.6 to
+/// 0.7 m) have a quarter of the Young's modulus: in series with the rest they take about four
+/// times the strain, so the bar must break there — and the rest, released at a quarter of the
+/// limit, rings below it (a released bar's strain waves at most double).
+fn bar() -> Scene {
+    let mesh = TetMesh::tet_box([1.2, 0.1, 0.1], [BAR_CELLS, 1, 1]).unwrap();
+    let material = NeoHookean {
+        young: 1e5,
+        poisson: 0.3,
+        density: 1000.0,
+    };
+    let mut s = mesh.to_scene("bar", material);
+    s.gravity = [0.0; 3];
+    for t in &mut s.tets {
+        if weak_tet(&t.vertices.map(|i| s.particles[i].position)) {
+            t.material = Some(NeoHookean {
+                young: 0.25 * material.young,
+                ..material
+            });
+        }
+    }
+    for (k, p) in s.particles.iter().enumerate() {
+        let x = p.position[0];
+        if x == 0.0 || x == 1.2 {
+            s.motions.push(MotionDesc {
+                particle: k,
+                motion: Motion::Linear {
+                    start: p.position,
+                    velocity: [if x == 0.0 { -0.5 } else { 0.5 }, 0.0, 0.0],
+                    t0: 0.0,
+                },
+            });
+        }
+    }
+    s.tearing = Some(TearParams { max_strain: LIMIT });
+    s
+}
+
+const BAR_CELLS: usize = 12;
+
+/// True for a tet (rest corners) of the weak cube.
+fn weak_tet(corners: &[[f64; 3]; 4]) -> bool {
+    let cx = corners.iter().map(|c| c[0]).sum::<f64>() / 4.0;
+    (0.6..0.7).contains(&cx)
+}
+
+/// The largest principal stretch minus one of each tet, from its rest corners and the
+/// positions, by power iteration on `FᵀF` (apart from the closed form the code uses).
+fn tet_strains(scene: &Scene, x: &[Vector]) -> Vec<f64> {
+    use glam::{DMat3, DVec3};
+    (0..scene.tets.len())
+        .map(|k| {
+            let t = &scene.tets[k];
+            let rest = t
+                .rest
+                .unwrap_or_else(|| t.vertices.map(|i| scene.particles[i].position))
+                .map(DVec3::from_array);
+            let p = t
+                .vertices
+                .map(|i| DVec3::new(x[i][0] as f64, x[i][1] as f64, x[i][2] as f64));
+            let dm = DMat3::from_cols(rest[1] - rest[0], rest[2] - rest[0], rest[3] - rest[0]);
+            let ds = DMat3::from_cols(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
+            let f = ds * dm.inverse();
+            let c = f.transpose() * f;
+            let mut v = DVec3::new(1.0, 0.7, 0.3).normalize();
+            let mut lambda = 0.0;
+            for _ in 0..500 {
+                let w = c * v;
+                lambda = w.length();
+                v = w / lambda;
+            }
+            lambda.sqrt() - 1.0
+        })
+        .collect()
+}
+
+#[test]
+fn a_bar_of_tets_pulled_at_both_ends_breaks_at_its_weak_section() {
+    let mut scene = bar();
+    let (model, state) = scene.build().unwrap();
+    let mut sim = Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::SymplecticEuler,
+            // About a third of the bar's stable step (`--scene` auto: `stable_step`).
+            policy: StepPolicy::Fixed { h: 2e-4 },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        },
+    );
+    let n0 = scene.particles.len();
+    let faces0 = scene.surface.as_ref().unwrap().triangles.len();
+    let (left, right) = (0, n0 - 1);
+    let mut first = None;
+    let mut apart = None;
+    let mut removed = 0;
+    for _ in 0..120 {
+        sim.advance_frame().unwrap();
+        assert!(sim.state.is_finite(), "NaN at frame {}", sim.frame);
+        let strains = tet_strains(&scene, &sim.state.x);
+        let before = scene.clone();
+        let mass_before: Vec<f64> = scene.particles.iter().map(|q| q.mass).collect();
+        let p_before = momentum(&mass_before, &sim.state.v);
+        let e_before = sim.system.elastic_energy(&sim.state.x) as f64;
+        let torn = tear_scene(&mut scene, &mut sim).unwrap();
+        // The same tets past the limit as the independent strains say (those within round-off
+        // of it either way).
+        for (k, &e) in strains.iter().enumerate() {
+            if (e - LIMIT).abs() > 1e-9 {
+                assert_eq!(
+                    torn.tets_over.contains(&k),
+                    e > LIMIT,
+                    "frame {}: tet {k} at strain {e}",
+                    sim.frame
+                );
+            }
+        }
+        if torn.tets_over.is_empty() {
+            continue;
+        }
+        // A split changes no tet's shape (copies start where their originals are) and keeps
+        // momentum (copies take their share of the mass at the same velocity).
+        let mass: Vec<f64> = scene.particles.iter().map(|q| q.mass).collect();
+        let p_after = momentum(&mass, &sim.state.v);
+        for c in 0..3 {
+            assert!(
+                (p_after[c] - p_before[c]).abs() <= 1e-9 * (1.0 + p_before[c].abs()),
+                "momentum {p_before:?} → {p_after:?}"
+            );
+        }
+        let e_after = sim.system.elastic_energy(&sim.state.x) as f64;
+        // A tet removed takes its (non-negative) energy with it.
+        if torn.tets_removed.is_empty() {
+            assert!(
+                (e_after - e_before).abs() <= 1e-6 * e_before,
+                "elastic energy {e_before} → {e_after} across a tear"
+            );
+        } else {
+            assert!(e_after <= e_before * (1.0 + 1e-6), "{e_before} → {e_after}");
+        }
+        // Only the weak cube's tets ever break: first, as the bar is pulled, and after, as
+        // the soft cube rings at the end of its piece.
+        for &k in &torn.tets_over {
+            let t = &before.tets[k];
+            let rest = t
+                .rest
+                .unwrap_or_else(|| t.vertices.map(|i| before.particles[i].position));
+            assert!(
+                weak_tet(&rest),
+                "frame {}: tet {k} broke outside the weak cube",
+                sim.frame
+            );
+        }
+        removed += torn.tets_removed.len();
+        first.get_or_insert((sim.frame, torn.tets_over.len()));
+        // The drawn surface is the boundary of the tets left.
+        let tets: Vec<[u32; 4]> = scene
+            .tets
+            .iter()
+            .map(|t| t.vertices.map(|i| i as u32))
+            .collect();
+        assert!(bevy_soft_body::core::tear::is_boundary_of(
+            &scene.surface.as_ref().unwrap().triangles,
+            &tets
+        ));
+        // Apart: the ends in different pieces of tets.
+        let n = scene.particles.len();
+        let by_tets = pieces(
+            n,
+            scene.tets.iter().flat_map(|t| {
+                let v = t.vertices;
+                [(v[0], v[1]), (v[0], v[2]), (v[0], v[3])]
+            }),
+        );
+        if apart.is_none() && by_tets[left] != by_tets[right] {
+            apart = Some((
+                sim.frame,
+                n - n0,
+                scene.surface.as_ref().unwrap().triangles.len(),
+            ));
+        }
+    }
+    let (frame, count) = first.expect("the bar never tore");
+    let (at, added, faces) = apart.expect("the bar never came apart");
+    println!(
+        "first break at frame {frame} ({count} tets), apart at frame {at}: {added} particles added, {faces0} → {faces} surface triangles; by frame {}: {} particles, {} tets removed",
+        sim.frame,
+        scene.particles.len(),
+        removed
+    );
+    // A crack across the bar in one plane of corners: each of the section's 2 × 2 corners
+    // split once, and the section's two triangles exposed on each side.
+    assert_eq!((added, faces), (4, faces0 + 4));
+    // The two pieces fly apart with their pulled ends and stay whole.
+    for _ in 0..60 {
+        sim.advance_frame().unwrap();
+        tear_scene(&mut scene, &mut sim).unwrap();
+        assert!(sim.state.is_finite());
+    }
+}
+
 #[cfg(feature = "plugin")]
 mod plugin {
     use super::*;
     use bevy::prelude::*;
     use bevy_soft_body::ecs::BodySim;
     use common::spawn;
+
+    /// The bar of tets as one body in a headless app: it breaks at its weak cube, the tets
+    /// that broke are named (split off at a corner, or despawned), the drawn surface is the
+    /// boundary of the tets left, the two ends end up in separate pieces, and the body goes on.
+    #[test]
+    fn a_tearable_body_of_tets_breaks_in_the_plugin() {
+        use bevy_soft_body::core::tear::is_boundary_of;
+        let scene = bar();
+        let mut app = common::headless_app(1.0 / 64.0);
+        let body = spawn(
+            &mut app,
+            &scene,
+            SoftBody {
+                integrator: IntegratorKind::SymplecticEuler,
+                step: StepPolicy::Fixed { h: 2e-4 },
+                ..Default::default()
+            },
+        );
+        let n0 = scene.particles.len();
+        let mut torn: Vec<SoftBodyTorn> = vec![];
+        // 40 frames, and on until one that does not tear (a torn body's model is rebuilt at
+        // its next step).
+        for frame in 0..80 {
+            app.update();
+            let msgs = app.world().resource::<Messages<SoftBodyTorn>>();
+            let now: Vec<SoftBodyTorn> = msgs.iter_current_update_messages().cloned().collect();
+            let world = app.world();
+            for p in world.get::<BodyParticles>(body).unwrap().iter() {
+                let p = world.get::<Particle>(p).unwrap();
+                assert!(p.position.is_finite() && p.velocity.is_finite());
+            }
+            if frame >= 40 && now.is_empty() {
+                break;
+            }
+            torn.extend(now);
+        }
+        let world = app.world();
+        assert!(!torn.is_empty(), "never tore");
+        // The first tets to break are the weak cube's (by their rest corners).
+        for &te in &torn[0].tets {
+            let t = world
+                .get::<Tet>(te)
+                .expect("the first tear split, not removed");
+            assert!(weak_tet(&t.rest.map(|p| p.as_dvec3().to_array())));
+        }
+        let bs = world.get::<BodySim>(body).unwrap();
+        let sim = bs.simulation().unwrap();
+        let particles = world.get::<BodyParticles>(body).unwrap().len();
+        assert_eq!(sim.state.x.len(), particles);
+        assert!(particles > n0);
+        assert_eq!(
+            sim.system.tets.len(),
+            world.get::<BodyTets>(body).unwrap().len()
+        );
+        let corners: Vec<[u32; 4]> = sim.system.tets.as_slice().iter().map(|t| t.v).collect();
+        let surf = world.get::<SoftBodySurface>(body).unwrap();
+        assert!(is_boundary_of(&surf.triangles, &corners));
+        let by_tets = pieces(
+            particles,
+            corners.iter().flat_map(|v| {
+                [(v[0], v[1]), (v[0], v[2]), (v[0], v[3])].map(|(a, b)| (a as usize, b as usize))
+            }),
+        );
+        assert_ne!(by_tets[0], by_tets[n0 - 1], "the ends are still joined");
+        let status = world.get::<SoftBodyStatus>(body).unwrap();
+        assert_eq!(status.state, BodyState::Running);
+        println!(
+            "plugin: {} tears, {} tets past the limit, {} particles added",
+            torn.len(),
+            torn.iter().map(|t| t.tets.len()).sum::<usize>(),
+            particles - n0
+        );
+    }
 
     /// The strip as one body in a headless app at 1/64 s frames: it tears where the core's
     /// strip tears, the components follow (particles added, broken springs despawned, the

@@ -29,6 +29,11 @@ pub struct Args {
 
 /// Parses the arguments, or prints `usage` and exits.
 pub fn args(usage: &str) -> Args {
+    args_with(usage, &[])
+}
+
+/// [`args`], with the example's own switches `flags` (read by the example) let through.
+pub fn args_with(usage: &str, flags: &[&str]) -> Args {
     let mut a = Args {
         integrator: None,
         h: None,
@@ -40,12 +45,18 @@ pub fn args(usage: &str) -> Args {
     let mut it = std::env::args().skip(1);
     let fail = |e: String| -> ! {
         eprintln!(
-            "error: {e}\nusage: {usage} [LETTER [H]] [--size N] [--detail L] [--screenshot FILE [--frames N]]"
+            "error: {e}\nusage: {usage} {} [LETTER [H]] [--size N] [--detail L] [--screenshot FILE [--frames N]]",
+            flags
+                .iter()
+                .map(|f| format!("[{f}]"))
+                .collect::<Vec<_>>()
+                .join(" ")
         );
         std::process::exit(1)
     };
     while let Some(arg) = it.next() {
         match arg.as_str() {
+            f if flags.contains(&f) => {}
             "--screenshot" => {
                 a.screenshot = Some(
                     it.next()

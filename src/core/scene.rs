@@ -88,8 +88,8 @@ pub struct ForceDesc {
     pub force: [f64; 3],
 }
 
-/// One linear tetrahedron of neo-Hookean material. Its rest shape is the initial positions
-/// of its four particles, which must have positive volume
+/// One linear tetrahedron of neo-Hookean material. Its rest shape (`rest`, or else the initial
+/// positions of its four particles) must have positive volume
 /// (`dot(b − a, (c − a) × (d − a)) > 0`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -99,6 +99,11 @@ pub struct TetDesc {
     /// Its own material; the scene's `material` when absent.
     #[serde(default)]
     pub material: Option<NeoHookean>,
+    /// Its rest shape (the four corners' rest positions, m); the particles' initial positions
+    /// when absent. Tearing sets it, so that a torn body rebuilt from its current state keeps
+    /// its tets' rest shapes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rest: Option<[[f64; 3]; 4]>,
 }
 
 /// A surface to draw: triangles over particle indices, with optional texture coordinates
@@ -363,6 +368,14 @@ impl Scene {
         })
     }
 
+    /// Rest shape of tet `k` (given, or its particles' initial positions).
+    pub fn tet_rest(&self, k: usize) -> [glam::DVec3; 4] {
+        let t = &self.tets[k];
+        t.rest
+            .unwrap_or_else(|| t.vertices.map(|i| self.particles[i].position))
+            .map(glam::DVec3::from_array)
+    }
+
     /// The scene's body as a [`BodyLayout`] (motions with an out-of-range particle are left
     /// out: [`Scene::validate`] reports them). A particle with a motion is moved by it, pinned
     /// or not.
@@ -405,7 +418,7 @@ impl Scene {
                 .iter()
                 .map(|t| LayoutTet {
                     vertices: t.vertices,
-                    rest: None,
+                    rest: t.rest.map(|r| r.map(glam::DVec3::from_array)),
                     material: t.material,
                 })
                 .collect(),
@@ -438,6 +451,13 @@ impl Scene {
         for p in &mut self.particles {
             for (c, o) in p.position.iter_mut().zip(offset) {
                 *c += o;
+            }
+        }
+        for r in self.tets.iter_mut().filter_map(|t| t.rest.as_mut()) {
+            for p in r {
+                for (c, o) in p.iter_mut().zip(offset) {
+                    *c += o;
+                }
             }
         }
         for m in &mut self.motions {

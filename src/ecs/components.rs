@@ -695,9 +695,11 @@ impl bevy::ecs::entity::MapEntities for SoftBodyInitial {
 
 /// Springs of the body break when stretched past `max_strain` (on the body root), and its
 /// [`SoftBodySurface`](crate::render::SoftBodySurface) tears along them: the particle at a
-/// broken surface edge is split square to the edge, and the drawn mesh follows (see
-/// [`crate::core::tear`]). Checked at every fixed step's end; each tear sends a
-/// [`SoftBodyTorn`] and rebuilds the body's model the next step. Scene key
+/// broken surface edge is split square to the edge, and the drawn mesh follows. Tets break
+/// when their largest principal stretch passes `1 + max_strain`: a corner is split by the
+/// plane square to the stretch, and a surface that is the tets' boundary is recomputed,
+/// showing the crack's faces (see [`crate::core::tear`]). Checked at every fixed step's end;
+/// each tear sends a [`SoftBodyTorn`] and rebuilds the body's model the next step. Scene key
 /// `"tearing": { "max_strain": … }`.
 #[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
 #[reflect(Component, Default, Debug)]
@@ -743,6 +745,9 @@ pub struct SoftBodyTorn {
     pub springs: Vec<Entity>,
     /// The particles split: (the original, its new copy).
     pub split: Vec<(Entity, Entity)>,
+    /// The tets strained past the limit: each split off at one of its corners (it now holds
+    /// the copy), or, when none of its corners could be split, removed (despawned).
+    pub tets: Vec<Entity>,
 }
 
 /// Send to put every body with a [`SoftBodyInitial`] back to it and the clock back to zero.

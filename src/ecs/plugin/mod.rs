@@ -248,6 +248,8 @@ pub struct BodySim {
     pub(crate) springs: Vec<Entity>,
     /// The spring entity of each packed spring.
     pub(crate) packed_springs: Vec<Entity>,
+    /// The tet entity of each packed tet.
+    pub(crate) packed_tets: Vec<Entity>,
     /// Torn this frame: its components changed, its model is rebuilt at the next step (until
     /// then its surface may name particles the model does not have yet).
     pub(crate) torn: bool,

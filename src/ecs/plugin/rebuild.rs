@@ -43,6 +43,7 @@ type TetParams<'w, 's> = (
 struct Built {
     sim: Simulation<ParticleState, ParticleModel>,
     packed_springs: Vec<Entity>,
+    packed_tets: Vec<Entity>,
     particles: Vec<Entity>,
     index: HashMap<Entity, u32>,
     follow: Vec<(u32, Entity, Vec3, Vec3)>,
@@ -226,6 +227,7 @@ fn build_body(
     Ok(Built {
         sim: Simulation::new(model, state, config),
         packed_springs,
+        packed_tets,
         particles: ents,
         index,
         follow,
@@ -434,6 +436,7 @@ pub(crate) fn prepare(
                     status.tets = b.sim.system.tets.len() as u32;
                     bs.sim = Some(b.sim);
                     bs.packed_springs = b.packed_springs;
+                    bs.packed_tets = b.packed_tets;
                     bs.particles = b.particles;
                     bs.index = b.index;
                     bs.follow = b.follow;

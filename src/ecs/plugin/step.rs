@@ -340,10 +340,14 @@ pub(super) fn tear(
     )>,
     mut particles: Query<(&mut Particle, Option<&Pinned>)>,
     mut springs: Query<&mut Spring>,
+    mut tets: Query<&mut Tet>,
     mut torn_msgs: MessageWriter<SoftBodyTorn>,
     mut commands: Commands,
 ) {
-    use crate::core::tear::{TearMesh, by_strain, overstretched, part_copies};
+    use crate::core::tear::{
+        TearMesh, by_strain, is_boundary_of, overstrained_tets, overstretched, part_copies,
+        tets_by_strain,
+    };
     for (body_e, tearable, mut bs, surface, mesh_surface) in &mut bodies {
         let bs = &mut *bs;
         let params = tearable.params();
@@ -361,15 +365,33 @@ pub(super) fn tear(
             &sim.state.x,
             params.max_strain,
         );
-        if over.is_empty() {
+        let packed_tets = sim.system.tets.as_slice();
+        let over_tets = overstrained_tets(
+            packed_tets.iter().map(|t| (t.v, &t.rest)),
+            &sim.state.x,
+            params.max_strain,
+        );
+        if over.is_empty() && over_tets.is_empty() {
             continue;
         }
+        let corners: Vec<[u32; 4]> = packed_tets.iter().map(|t| t.v).collect();
+        // A surface that is the tets' boundary is recomputed from them after the tear.
+        let boundary = !corners.is_empty()
+            && surface
+                .as_ref()
+                .is_some_and(|s| is_boundary_of(&s.triangles, &corners));
         let mut mesh = TearMesh::new(
             packed.iter().map(|s| [s.i, s.j]).collect(),
             surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
-        );
+        )
+        .with_tets(corners);
         let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
-        let torn = mesh.tear(&by_strain(&over), &sim.state.x, &mut mass);
+        let torn = mesh.tear_with_tets(
+            &by_strain(&over),
+            &tets_by_strain(&over_tets),
+            &sim.state.x,
+            &mut mass,
+        );
         let n = bs.particles.len();
         // Positions after the tear: copies where their originals are, and with self-collision
         // each side of a cut moved half the thickness into its own side.
@@ -456,11 +478,44 @@ pub(super) fn tear(
         for &se in &broken {
             commands.entity(se).despawn();
         }
+        // Tets split off at a corner take the copy; those that could not be are removed.
+        for &(k, c) in &torn.tets_moved {
+            if let Some(&te) = bs.packed_tets.get(k)
+                && let Ok(mut t) = tets.get_mut(te)
+            {
+                t.particles = c.map(|i| entity[i as usize]);
+            }
+        }
+        let tets_over: Vec<Entity> = torn
+            .tets_over
+            .iter()
+            .filter_map(|&k| bs.packed_tets.get(k).copied())
+            .collect();
+        for &k in &torn.tets_removed {
+            if let Some(&te) = bs.packed_tets.get(k) {
+                commands.entity(te).despawn();
+            }
+        }
         if let Some(mut surf) = surface
-            && !torn.copies.is_empty()
+            && (!torn.copies.is_empty() || !torn.tets_removed.is_empty())
         {
             let surf = &mut *surf;
-            surf.triangles = mesh.triangles;
+            surf.triangles = if boundary {
+                let mut gone = vec![false; mesh.tets.len()];
+                for &k in &torn.tets_removed {
+                    gone[k] = true;
+                }
+                let left: Vec<[u32; 4]> = mesh
+                    .tets
+                    .iter()
+                    .zip(&gone)
+                    .filter(|(_, g)| !**g)
+                    .map(|(t, _)| *t)
+                    .collect();
+                crate::core::fem::mesh::boundary_faces(&left)
+            } else {
+                mesh.triangles
+            };
             if !surf.uvs.is_empty() && surf.uvs.len() <= n {
                 // Particles the surface does not show (a mouse grab's handle) have none.
                 surf.uvs.resize(n, [0.0; 2]);
@@ -474,7 +529,7 @@ pub(super) fn tear(
                 .entity(body_e)
                 .remove::<crate::render::SurfaceVertices>();
         }
-        if mesh_surface && !torn.copies.is_empty() {
+        if mesh_surface && (!torn.copies.is_empty() || !torn.tets_removed.is_empty()) {
             warn_once!(
                 "soft body {body_e}: Tearable with a SoftBodyMeshSurface: the physics tears, but the game's mesh is drawn whole (only a SoftBodySurface is split)"
             );
@@ -484,6 +539,7 @@ pub(super) fn tear(
             body: body_e,
             springs: broken,
             split,
+            tets: tets_over,
         };
         commands.trigger(event.clone());
         torn_msgs.write(event);

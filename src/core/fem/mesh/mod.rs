@@ -316,6 +316,7 @@ impl TetMesh {
                 .map(|t| TetDesc {
                     vertices: t.map(|i| i as usize),
                     material: None,
+                    rest: None,
                 })
                 .collect(),
             material: Some(material),
