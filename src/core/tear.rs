@@ -316,7 +316,8 @@ impl TearMesh {
     /// of tets past the limit, most strained first, each with the direction of its largest
     /// stretch: [`tets_by_strain`]): each splits off at a corner (see the module docs), or is
     /// named in [`Torn::tets_removed`] when none of its corners can be split. Removed tets
-    /// stay in the list, as broken springs do.
+    /// stay in the list, as broken springs do. When the triangles are the tets' boundary
+    /// ([`is_boundary_of`]), they become the boundary of the tets left, crack faces and all.
     pub fn tear_with_tets(
         &mut self,
         broken: &[usize],
@@ -325,6 +326,7 @@ impl TearMesh {
         mass: &mut Vec<f64>,
     ) -> Torn {
         let mut torn = Torn::default();
+        let boundary = !self.tets.is_empty() && is_boundary_of(&self.triangles, &self.tets);
         let mut x = x.to_vec();
         // Triangles and springs at each particle.
         let mut vt = incidence(&self.triangles, x.len());
@@ -464,6 +466,13 @@ impl TearMesh {
             .filter(|&t| !gone[t])
             .map(|t| (t, self.tets[t]))
             .collect();
+        if boundary {
+            let left: Vec<[u32; 4]> = (self.tets.iter().zip(&gone))
+                .filter(|(_, g)| !**g)
+                .map(|(t, _)| *t)
+                .collect();
+            self.triangles = boundary_faces(&left);
+        }
         if dead.iter().any(|&d| d) {
             let mut k = 0;
             self.triangles.retain(|_| {
@@ -813,12 +822,6 @@ pub fn tear_scene(
     for (t, r) in scene.tets.iter_mut().zip(&tet_rest) {
         t.rest = Some(r.map(|p| p.to_array()));
     }
-    // A surface that is the tets' boundary is recomputed from them after the tear.
-    let boundary = !scene.tets.is_empty()
-        && scene
-            .surface
-            .as_ref()
-            .is_some_and(|s| is_boundary_of(&s.triangles, &tet_corners));
     let mut mesh = TearMesh::new(
         scene
             .springs
@@ -909,16 +912,7 @@ pub fn tear_scene(
         torn.tets_removed.binary_search(&(k - 1)).is_err()
     });
     if let Some(s) = &mut scene.surface {
-        s.triangles = if boundary {
-            let tets: Vec<[u32; 4]> = scene
-                .tets
-                .iter()
-                .map(|t| t.vertices.map(|i| i as u32))
-                .collect();
-            boundary_faces(&tets)
-        } else {
-            mesh.triangles
-        };
+        s.triangles = mesh.triangles;
     }
     let (model, state) = scene.build()?;
     sim.replace(model, state);

@@ -345,8 +345,7 @@ pub(super) fn tear(
     mut commands: Commands,
 ) {
     use crate::core::tear::{
-        TearMesh, by_strain, is_boundary_of, overstrained_tets, overstretched, part_copies,
-        tets_by_strain,
+        TearMesh, by_strain, overstrained_tets, overstretched, part_copies, tets_by_strain,
     };
     for (body_e, tearable, mut bs, surface, mesh_surface) in &mut bodies {
         let bs = &mut *bs;
@@ -375,11 +374,6 @@ pub(super) fn tear(
             continue;
         }
         let corners: Vec<[u32; 4]> = packed_tets.iter().map(|t| t.v).collect();
-        // A surface that is the tets' boundary is recomputed from them after the tear.
-        let boundary = !corners.is_empty()
-            && surface
-                .as_ref()
-                .is_some_and(|s| is_boundary_of(&s.triangles, &corners));
         let mut mesh = TearMesh::new(
             packed.iter().map(|s| [s.i, s.j]).collect(),
             surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
@@ -500,22 +494,7 @@ pub(super) fn tear(
             && (!torn.copies.is_empty() || !torn.tets_removed.is_empty())
         {
             let surf = &mut *surf;
-            surf.triangles = if boundary {
-                let mut gone = vec![false; mesh.tets.len()];
-                for &k in &torn.tets_removed {
-                    gone[k] = true;
-                }
-                let left: Vec<[u32; 4]> = mesh
-                    .tets
-                    .iter()
-                    .zip(&gone)
-                    .filter(|(_, g)| !**g)
-                    .map(|(t, _)| *t)
-                    .collect();
-                crate::core::fem::mesh::boundary_faces(&left)
-            } else {
-                mesh.triangles
-            };
+            surf.triangles = mesh.triangles;
             if !surf.uvs.is_empty() && surf.uvs.len() <= n {
                 // Particles the surface does not show (a mouse grab's handle) have none.
                 surf.uvs.resize(n, [0.0; 2]);
