@@ -1,0 +1,505 @@
+//! An aggregation multigrid preconditioner for [`SpringMatrix`] systems.
+//!
+//! Block-Jacobi leaves conjugate gradients with a number of iterations that grows with the
+//! resolution (the smooth, long-wavelength errors of a cloth are barely touched by a local
+//! preconditioner). A multigrid V-cycle removes them on coarser copies of the system:
+//!
+//! - **Aggregates.** Each level's particles are grouped by the greedy aggregation of Vaněk,
+//!   Mandel and Brezina (1996, *Algebraic multigrid by smoothed aggregation for second and
+//!   fourth order elliptic problems*): a particle none of whose neighbours is taken yet starts
+//!   an aggregate with them; the rest join an aggregate next to them. One coarse node per
+//!   aggregate, with three degrees of freedom (the aggregate's common translation: the
+//!   prolongation `P` copies a coarse node's vector to every member).
+//! - **Coarse matrices.** `A_c = Pᵀ A P` (Galerkin), which for this `P` is a sum of blocks:
+//!   every block of `A` lands in the block of its two aggregates. The aggregates and where
+//!   each block lands are computed once per structure; each solve only re-sums the values
+//!   (unsmoothed aggregation: no matrix product).
+//! - **Cycle.** A symmetric V-cycle: one forward block Gauss–Seidel sweep, the residual
+//!   restricted (`Pᵀ`), the coarse level's cycle, the correction prolonged (`P`), one backward
+//!   sweep; a dense Cholesky solve on the coarsest level. Forward and backward sweeps are each
+//!   other's adjoints and the coarse solves are symmetric positive definite, so the cycle is a
+//!   symmetric positive definite operator — what conjugate gradients needs of a
+//!   preconditioner — for any symmetric positive definite `A`, with no damping to tune.
+//!
+//! Pinned and prescribed particles (mask zero) are cut loose: their rows and columns are
+//! dropped and their diagonal blocks replaced by the identity, so the cycle returns zero for
+//! them and the free part is preconditioned as the filtered conjugate gradients iterate on it.
+
+use super::SpringMatrix;
+use crate::math::{Matrix3, Scalar, Vector};
+
+/// A level stops being coarsened below this many nodes (solved densely), or when aggregation
+/// no longer shrinks it to at most this fraction.
+const COARSEST: usize = 48;
+const SHRINK: f64 = 0.7;
+/// Where a fine block lands: the coarse diagonal of its aggregate (both ends in one).
+const TO_DIAG: u32 = u32::MAX;
+
+/// A level's matrix, rows stored in full (`(i, j)` and `(j, i)` both present).
+#[derive(Clone, Debug, Default)]
+struct Level {
+    start: Vec<u32>,
+    col: Vec<u32>,
+    off: Vec<Matrix3>,
+    diag: Vec<Matrix3>,
+    inv: Vec<Matrix3>,
+    /// This level's node → the next level's (empty on the coarsest level).
+    agg: Vec<u32>,
+    /// For each off-diagonal entry, where it lands on the next level (an index into its
+    /// `off`, or [`TO_DIAG`]).
+    land: Vec<u32>,
+    r: Vec<Vector>,
+    z: Vec<Vector>,
+    t: Vec<Vector>,
+}
+
+impl Level {
+    fn len(&self) -> usize {
+        self.diag.len()
+    }
+
+    /// `z_i ← D_i⁻¹ (r_i − Σ_{j≠i} A_ij z_j)` for `i` in `order`.
+    fn sweep(&mut self, order: impl Iterator<Item = usize>) {
+        for i in order {
+            let mut s = self.r[i];
+            for e in self.start[i] as usize..self.start[i + 1] as usize {
+                s -= self.off[e] * self.z[self.col[e] as usize];
+            }
+            self.z[i] = self.inv[i] * s;
+        }
+    }
+
+    /// `t ← r − A z`.
+    fn residual(&mut self) {
+        for i in 0..self.len() {
+            let mut s = self.r[i] - self.diag[i] * self.z[i];
+            for e in self.start[i] as usize..self.start[i + 1] as usize {
+                s -= self.off[e] * self.z[self.col[e] as usize];
+            }
+            self.t[i] = s;
+        }
+    }
+
+    fn invert(&mut self) {
+        self.inv.resize(self.len(), Matrix3::IDENTITY);
+        for (inv, d) in self.inv.iter_mut().zip(&self.diag) {
+            let det = d.determinant();
+            *inv = if det.is_normal() {
+                d.inverse()
+            } else {
+                Matrix3::IDENTITY
+            };
+        }
+    }
+}
+
+/// Rows in full from a list of node pairs (each pair in both rows, sorted by column, repeats
+/// merged): `(start, col, entry of each pair's (i, j), entry of its (j, i))`; a pair joining
+/// a node to itself gets `TO_DIAG` for both.
+fn rows_of(n: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>, Vec<u32>, Vec<u32>) {
+    let mut adj: Vec<Vec<u32>> = vec![vec![]; n];
+    for &(i, j) in pairs {
+        if i != j {
+            adj[i as usize].push(j);
+            adj[j as usize].push(i);
+        }
+    }
+    let mut start = vec![0u32; n + 1];
+    let mut col = vec![];
+    for (i, a) in adj.iter_mut().enumerate() {
+        a.sort_unstable();
+        a.dedup();
+        col.extend_from_slice(a);
+        start[i + 1] = col.len() as u32;
+    }
+    let find = |i: u32, j: u32| -> u32 {
+        let (s, e) = (start[i as usize] as usize, start[i as usize + 1] as usize);
+        s as u32 + col[s..e].binary_search(&j).expect("pair in its row") as u32
+    };
+    let (ij, ji) = pairs
+        .iter()
+        .map(|&(i, j)| {
+            if i == j {
+                (TO_DIAG, TO_DIAG)
+            } else {
+                (find(i, j), find(j, i))
+            }
+        })
+        .unzip();
+    (start, col, ij, ji)
+}
+
+/// Greedy aggregation of the graph in rows `(start, col)`: node → aggregate, and the count.
+#[allow(clippy::needless_range_loop)] // `i` indexes the rows and the aggregates alike
+fn aggregate(start: &[u32], col: &[u32]) -> (Vec<u32>, usize) {
+    let n = start.len() - 1;
+    let nbrs = |i: usize| &col[start[i] as usize..start[i + 1] as usize];
+    let mut agg = vec![u32::MAX; n];
+    let mut count = 0u32;
+    // 1: a node whose neighbours are all free takes them.
+    for i in 0..n {
+        if agg[i] == u32::MAX && nbrs(i).iter().all(|&j| agg[j as usize] == u32::MAX) {
+            agg[i] = count;
+            for &j in nbrs(i) {
+                agg[j as usize] = count;
+            }
+            count += 1;
+        }
+    }
+    // 2: the rest join a neighbouring aggregate from step 1 (the first in column order).
+    let first = agg.clone();
+    for i in 0..n {
+        if agg[i] == u32::MAX
+            && let Some(&j) = nbrs(i).iter().find(|&&j| first[j as usize] != u32::MAX)
+        {
+            agg[i] = first[j as usize];
+        }
+    }
+    // 3: nodes with no aggregated neighbour (isolated ones) are their own.
+    for a in agg.iter_mut().filter(|a| **a == u32::MAX) {
+        *a = count;
+        count += 1;
+    }
+    (agg, count as usize)
+}
+
+/// The aggregation multigrid preconditioner (see the module docs). Owns its levels and
+/// buffers; the structure is rebuilt when the matrix's changes, values on every
+/// [`setup`](Self::setup).
+#[derive(Clone, Debug, Default)]
+pub struct Multigrid {
+    pairs: Vec<(u32, u32)>,
+    /// Where each pair's blocks `(i, j)` and `(j, i)` of the matrix land on the first
+    /// coarse level.
+    land_ij: Vec<u32>,
+    land_ji: Vec<u32>,
+    /// The finest level's smoothing weight (see [`Multigrid::setup`]).
+    omega: Scalar,
+    /// The finest level keeps no rows of its own (its products are the matrix's); the
+    /// coarser ones do.
+    levels: Vec<Level>,
+    /// The coarsest level's Cholesky factor (dense, lower, row-major, `f64`), and its size.
+    chol: Vec<f64>,
+    dense_ok: bool,
+    rhs: Vec<f64>,
+    /// Structures analysed so far.
+    pub analyses: u64,
+}
+
+impl Multigrid {
+    /// Number of levels (the finest included) of the last structure.
+    pub fn levels(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Nodes on each level, finest first.
+    pub fn sizes(&self) -> Vec<usize> {
+        self.levels.iter().map(Level::len).collect()
+    }
+
+    fn analyse(&mut self, a: &SpringMatrix) {
+        let n = a.len();
+        self.pairs = a.pairs().to_vec();
+        let (start, col, ij, ji) = rows_of(n, &self.pairs);
+        let mut levels = vec![Level {
+            off: vec![Matrix3::ZERO; col.len()],
+            diag: vec![Matrix3::ZERO; n],
+            start,
+            col,
+            ..Default::default()
+        }];
+        loop {
+            let fine = levels.last_mut().expect("a level");
+            let m = fine.len();
+            if m <= COARSEST {
+                break;
+            }
+            let (agg, count) = aggregate(&fine.start, &fine.col);
+            if count as f64 > SHRINK * m as f64 {
+                break;
+            }
+            // The coarse graph: aggregates joined by any fine entry between them.
+            let mut pairs = vec![];
+            for i in 0..m {
+                for e in fine.start[i] as usize..fine.start[i + 1] as usize {
+                    let (a, b) = (agg[i], agg[fine.col[e] as usize]);
+                    if a < b {
+                        pairs.push((a, b));
+                    }
+                }
+            }
+            pairs.sort_unstable();
+            pairs.dedup();
+            let (start, col, ..) = rows_of(count, &pairs);
+            let coarse = Level {
+                off: vec![Matrix3::ZERO; col.len()],
+                diag: vec![Matrix3::ZERO; count],
+                start,
+                col,
+                ..Default::default()
+            };
+            let mut land = vec![TO_DIAG; fine.col.len()];
+            for i in 0..m {
+                let a = agg[i];
+                for e in fine.start[i] as usize..fine.start[i + 1] as usize {
+                    let b = agg[fine.col[e] as usize];
+                    if a != b {
+                        let (s, t) = (
+                            coarse.start[a as usize] as usize,
+                            coarse.start[a as usize + 1] as usize,
+                        );
+                        land[e] =
+                            (s + coarse.col[s..t].binary_search(&b).expect("coarse entry")) as u32;
+                    }
+                }
+            }
+            fine.agg = agg;
+            fine.land = land;
+            levels.push(coarse);
+        }
+        let fine = &mut levels[0];
+        let land = |e: u32| fine.land.get(e as usize).copied().unwrap_or(TO_DIAG);
+        self.land_ij = ij.iter().map(|&e| land(e)).collect();
+        self.land_ji = ji.iter().map(|&e| land(e)).collect();
+        fine.start.clear();
+        fine.col.clear();
+        fine.off.clear();
+        fine.land.clear();
+        for l in &mut levels {
+            let m = l.len();
+            l.r = vec![Vector::ZERO; m];
+            l.z = vec![Vector::ZERO; m];
+            l.t = vec![Vector::ZERO; m];
+        }
+        let last = levels.last().map_or(0, Level::len);
+        self.chol = vec![0.0; 9 * last * last];
+        self.rhs = vec![0.0; 3 * last];
+        self.levels = levels;
+        self.analyses += 1;
+    }
+
+    /// Takes the values of `a`, with the particles whose `mask` is zero cut loose (see the
+    /// module docs), and sums the coarse levels.
+    ///
+    /// The finest level is smoothed by damped block-Jacobi, `z ← z + ω D⁻¹ (r − A z)`, which
+    /// needs only the matrix's own product. The cycle is positive definite when
+    /// `ω A < 2 D`. Every block of the matrix comes from an element's positive semidefinite
+    /// matrix over `e` particles (a spring's `e = 2`, a tet's `4`; masses add to the diagonal
+    /// only), and such a matrix is at most `e` times its own block diagonal (Cauchy–Schwarz
+    /// on `‖Σ_k B_k x_k‖²`), so `A ≤ e D`: `ω = 2/(3e)` keeps a third of the margin. Matrices
+    /// with blocks that are not symmetric (tets' edges) are taken to hold tets.
+    pub fn setup(&mut self, a: &SpringMatrix, mask: &[Scalar]) {
+        let n = a.len();
+        if self.levels.first().map(Level::len) != Some(n)
+            || !a.matches_pairs(n, self.pairs.iter().copied())
+        {
+            self.analyse(a);
+        }
+        let sym = a.symmetric_prefix();
+        self.omega = if sym < a.off.len() {
+            1.0 / 6.0
+        } else {
+            1.0 / 3.0
+        };
+        let (fine, rest) = self.levels.split_at_mut(1);
+        let fine = &mut fine[0];
+        for (i, (d, m)) in a.diag.iter().zip(mask).enumerate() {
+            fine.diag[i] = if *m == 0.0 { Matrix3::IDENTITY } else { *d };
+        }
+        fine.invert();
+        if let Some(coarse) = rest.first_mut() {
+            coarse.diag.fill(Matrix3::ZERO);
+            coarse.off.fill(Matrix3::ZERO);
+            for (i, d) in a.diag.iter().enumerate() {
+                if mask[i] != 0.0 {
+                    coarse.diag[fine.agg[i] as usize] += *d;
+                }
+            }
+            for (k, (o, &(i, j))) in a.off.iter().zip(a.pairs()).enumerate() {
+                if mask[i as usize] == 0.0 || mask[j as usize] == 0.0 {
+                    continue;
+                }
+                let ot = if k < sym { *o } else { o.transpose() };
+                for (to, b, at) in [(self.land_ij[k], *o, i), (self.land_ji[k], ot, j)] {
+                    if to == TO_DIAG {
+                        coarse.diag[fine.agg[at as usize] as usize] += b;
+                    } else {
+                        coarse.off[to as usize] += b;
+                    }
+                }
+            }
+            fill_empty(&mut coarse.diag);
+        }
+        for l in 1..self.levels.len() {
+            let (done, rest) = self.levels.split_at_mut(l + 1);
+            let fine = &mut done[l];
+            fine.invert();
+            let Some(coarse) = rest.first_mut() else {
+                break;
+            };
+            coarse.diag.fill(Matrix3::ZERO);
+            coarse.off.fill(Matrix3::ZERO);
+            for i in 0..fine.len() {
+                let ai = fine.agg[i] as usize;
+                coarse.diag[ai] += fine.diag[i];
+                for e in fine.start[i] as usize..fine.start[i + 1] as usize {
+                    let to = fine.land[e];
+                    if to == TO_DIAG {
+                        coarse.diag[ai] += fine.off[e];
+                    } else {
+                        coarse.off[to as usize] += fine.off[e];
+                    }
+                }
+            }
+            fill_empty(&mut coarse.diag);
+        }
+        self.factor_coarsest();
+    }
+
+    fn factor_coarsest(&mut self) {
+        let last = self.levels.last().expect("a level");
+        let m = 3 * last.len();
+        let c = &mut self.chol;
+        c.fill(0.0);
+        for i in 0..last.len() {
+            let mut put = |bi: usize, bj: usize, b: &Matrix3| {
+                for r in 0..3 {
+                    for q in 0..3 {
+                        c[(3 * bi + r) * m + 3 * bj + q] += b.col(q)[r] as f64;
+                    }
+                }
+            };
+            put(i, i, &last.diag[i]);
+            for e in last.start[i] as usize..last.start[i + 1] as usize {
+                put(i, last.col[e] as usize, &last.off[e]);
+            }
+        }
+        // In-place Cholesky, lower triangle.
+        self.dense_ok = true;
+        for j in 0..m {
+            let mut d = c[j * m + j];
+            for k in 0..j {
+                d -= c[j * m + k] * c[j * m + k];
+            }
+            if d.is_nan() || d <= 0.0 {
+                self.dense_ok = false;
+                return;
+            }
+            let d = d.sqrt();
+            c[j * m + j] = d;
+            for i in j + 1..m {
+                let mut s = c[i * m + j];
+                for k in 0..j {
+                    s -= c[i * m + k] * c[j * m + k];
+                }
+                c[i * m + j] = s / d;
+            }
+        }
+    }
+
+    fn solve_coarsest(&mut self) {
+        let last = self.levels.last_mut().expect("a level");
+        if !self.dense_ok {
+            // Not numerically definite: symmetric Gauss–Seidel instead (still symmetric).
+            last.z.fill(Vector::ZERO);
+            let m = last.len();
+            last.sweep(0..m);
+            last.sweep((0..m).rev());
+            return;
+        }
+        let m = 3 * last.len();
+        let (c, y) = (&self.chol, &mut self.rhs);
+        for (i, r) in last.r.iter().enumerate() {
+            for q in 0..3 {
+                y[3 * i + q] = r[q] as f64;
+            }
+        }
+        for i in 0..m {
+            let mut s = y[i];
+            for k in 0..i {
+                s -= c[i * m + k] * y[k];
+            }
+            y[i] = s / c[i * m + i];
+        }
+        for i in (0..m).rev() {
+            let mut s = y[i];
+            for k in i + 1..m {
+                s -= c[k * m + i] * y[k];
+            }
+            y[i] = s / c[i * m + i];
+        }
+        for (i, z) in last.z.iter_mut().enumerate() {
+            *z = Vector::new(
+                y[3 * i] as Scalar,
+                y[3 * i + 1] as Scalar,
+                y[3 * i + 2] as Scalar,
+            );
+        }
+    }
+
+    /// `z ← B r` for the V-cycle `B ≈ A⁻¹` of the last [`setup`](Self::setup) (`a` and
+    /// `mask` the ones given to it).
+    pub fn apply(&mut self, a: &SpringMatrix, mask: &[Scalar], r: &[Vector], z: &mut [Vector]) {
+        let nl = self.levels.len();
+        let w = self.omega;
+        {
+            let fine = &mut self.levels[0];
+            for ((z, inv), r) in fine.z.iter_mut().zip(&fine.inv).zip(r) {
+                *z = *inv * *r * w;
+            }
+            if nl == 1 {
+                z.copy_from_slice(&fine.z);
+                return;
+            }
+            a.mul(&fine.z, &mut fine.t);
+            for ((t, r), m) in fine.t.iter_mut().zip(r).zip(mask) {
+                *t = (*r - *t) * *m;
+            }
+        }
+        for l in 0..nl - 1 {
+            let (done, rest) = self.levels.split_at_mut(l + 1);
+            let (fine, coarse) = (&mut done[l], &mut rest[0]);
+            if l > 0 {
+                let m = fine.len();
+                fine.z.fill(Vector::ZERO);
+                fine.sweep(0..m);
+                fine.residual();
+            }
+            coarse.r.fill(Vector::ZERO);
+            for (t, &a) in fine.t.iter().zip(&fine.agg) {
+                coarse.r[a as usize] += *t;
+            }
+        }
+        self.solve_coarsest();
+        for l in (0..nl - 1).rev() {
+            let (done, rest) = self.levels.split_at_mut(l + 1);
+            let (fine, coarse) = (&mut done[l], &rest[0]);
+            if l > 0 {
+                for (z, &a) in fine.z.iter_mut().zip(&fine.agg) {
+                    *z += coarse.z[a as usize];
+                }
+                let m = fine.len();
+                fine.sweep((0..m).rev());
+            } else {
+                for ((z, &a), m) in fine.z.iter_mut().zip(&fine.agg).zip(mask) {
+                    *z += coarse.z[a as usize] * *m;
+                }
+            }
+        }
+        let fine = &mut self.levels[0];
+        a.mul(&fine.z, &mut fine.t);
+        // Masked particles: r = 0, D⁻¹ = I and z = 0, so they stay at zero.
+        for (i, z) in z.iter_mut().enumerate() {
+            *z = fine.z[i] + fine.inv[i] * (r[i] - fine.t[i]) * (w * mask[i]);
+        }
+    }
+}
+
+/// Aggregates of cut-loose particles only: their own unknowns, decoupled.
+fn fill_empty(diag: &mut [Matrix3]) {
+    for d in diag {
+        if *d == Matrix3::ZERO {
+            *d = Matrix3::IDENTITY;
+        }
+    }
+}
