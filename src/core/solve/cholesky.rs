@@ -12,6 +12,7 @@ use super::{PcgReport, SpringMatrix};
 use crate::math::{Scalar, ToScalar, Vector};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
 };
@@ -94,7 +95,13 @@ pub(crate) fn analyse_upper(
         sym,
         Side::Upper,
         SymmetricOrdering::Amd,
-        CholeskySymbolicParams::default(),
+        // Supernodal always: faer's automatic choice took the simplicial factorization for the
+        // armadillo (1,488 free unknowns), 5.57 ms per backward Euler step against 4.38
+        // supernodal; the cloths and the bunny time the same either way.
+        CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+            ..Default::default()
+        },
     )
     .ok()?;
     let l_values = vec![0.0; symbolic.len_val()];
