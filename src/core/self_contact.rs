@@ -177,6 +177,12 @@ impl ContactSurface {
             .collect();
     }
 
+    /// The particle each was split from by tearing, chains followed to the first (its own
+    /// index when not split).
+    pub fn origins(&self) -> &[u32] {
+        &self.origin
+    }
+
     /// True when some particle was split from another (the surface was torn).
     pub fn is_torn(&self) -> bool {
         self.origin

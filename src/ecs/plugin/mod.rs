@@ -255,6 +255,10 @@ pub struct BodySim {
     pub(crate) torn: bool,
     /// Tet entities in the body's relationship order.
     pub(crate) tets: Vec<Entity>,
+    /// Each particle split off by tearing → the particle it was split from, for bodies with
+    /// no `SoftBodySurface` to keep that record (self-collision needs it: the two sides of a
+    /// crack are not one flat patch).
+    pub(crate) torn_origin: HashMap<Entity, Entity>,
     /// Positions and velocities as last written to the components (to tell user edits apart).
     written: Vec<(Vec3, Vec3)>,
     /// Particles following a target: index, target, offset, target's last position.

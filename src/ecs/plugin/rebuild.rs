@@ -411,9 +411,10 @@ pub(crate) fn prepare(
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
                 auto: auto_settings.map_or(AutoConfig::default(), |a| a.0),
                 self_collision: self_collision.map(|c| {
-                    let (tris, from) = surface.map_or((vec![], vec![]), |s| {
-                        (s.triangles.clone(), s.torn_from.clone())
-                    });
+                    let (tris, from) = surface.map_or_else(
+                        || (vec![], torn_origins(plist, &bs.torn_origin)),
+                        |s| (s.triangles.clone(), s.torn_from.clone()),
+                    );
                     (*c, tris, from)
                 }),
                 tearable: tearable.map(|t| *t),
@@ -548,4 +549,29 @@ fn follow_removed_particles(
     commands
         .entity(body_e)
         .remove::<crate::render::SurfaceVertices>();
+}
+
+/// The packed index each particle of `plist` was torn from (its own when not torn, or when
+/// the one it was torn from is gone), from a body's record by entity; empty when nothing
+/// was torn.
+fn torn_origins(plist: &[Entity], origin: &HashMap<Entity, Entity>) -> Vec<u32> {
+    if origin.is_empty() {
+        return vec![];
+    }
+    let index: HashMap<Entity, u32> = plist
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| (e, i as u32))
+        .collect();
+    plist
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            origin
+                .get(e)
+                .and_then(|o| index.get(o))
+                .copied()
+                .unwrap_or(i as u32)
+        })
+        .collect()
 }

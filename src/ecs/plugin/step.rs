@@ -490,6 +490,7 @@ pub(super) fn tear(
                 commands.entity(te).despawn();
             }
         }
+        let has_surface = surface.is_some();
         if let Some(mut surf) = surface
             && (!torn.copies.is_empty() || !torn.tets_removed.is_empty())
         {
@@ -507,6 +508,11 @@ pub(super) fn tear(
             commands
                 .entity(body_e)
                 .remove::<crate::render::SurfaceVertices>();
+        }
+        if !has_surface {
+            for &(parent, copy) in &split {
+                bs.torn_origin.insert(copy, parent);
+            }
         }
         if mesh_surface && (!torn.copies.is_empty() || !torn.tets_removed.is_empty()) {
             warn_once!(
