@@ -425,6 +425,22 @@ mod plugin {
     use bevy_soft_body::ecs::BodySim;
     use common::spawn;
 
+    /// A headless app at 1/64 s frames with `scene` (a bar) as one body, stepped by
+    /// symplectic Euler at the core test's step.
+    fn bar_app(scene: &Scene) -> (App, Entity) {
+        let mut app = common::headless_app(1.0 / 64.0);
+        let body = spawn(
+            &mut app,
+            scene,
+            SoftBody {
+                integrator: IntegratorKind::SymplecticEuler,
+                step: StepPolicy::Fixed { h: 2e-4 },
+                ..Default::default()
+            },
+        );
+        (app, body)
+    }
+
     /// The bar of tets as one body in a headless app: it breaks at its weak cube, the tets
     /// that broke are named (split off at a corner, or despawned), the drawn surface is the
     /// boundary of the tets left, the two ends end up in separate pieces, and the body goes on.
@@ -432,16 +448,7 @@ mod plugin {
     fn a_tearable_body_of_tets_breaks_in_the_plugin() {
         use bevy_soft_body::core::tear::is_boundary_of;
         let scene = bar();
-        let mut app = common::headless_app(1.0 / 64.0);
-        let body = spawn(
-            &mut app,
-            &scene,
-            SoftBody {
-                integrator: IntegratorKind::SymplecticEuler,
-                step: StepPolicy::Fixed { h: 2e-4 },
-                ..Default::default()
-            },
-        );
+        let (mut app, body) = bar_app(&scene);
         let n0 = scene.particles.len();
         let mut torn: Vec<SoftBodyTorn> = vec![];
         // 40 frames, and on until one that does not tear (a torn body's model is rebuilt at
@@ -513,16 +520,7 @@ mod plugin {
             thickness: 0.01,
             friction: 0.0,
         });
-        let mut app = common::headless_app(1.0 / 64.0);
-        let body = spawn(
-            &mut app,
-            &scene,
-            SoftBody {
-                integrator: IntegratorKind::SymplecticEuler,
-                step: StepPolicy::Fixed { h: 2e-4 },
-                ..Default::default()
-            },
-        );
+        let (mut app, body) = bar_app(&scene);
         assert!(app.world().get::<SoftBodySurface>(body).is_none());
         assert!(app.world().get::<SelfCollision>(body).is_some());
         let mut root: HashMap<Entity, Entity> = HashMap::default();
