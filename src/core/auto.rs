@@ -403,7 +403,11 @@ pub fn probe(
 /// has the table): a symplectic Euler step 4.7 ns per spring (seed cloths 16² to 64², the
 /// bench cloth) and 36 ns per tet (the bunny); RK4 four of those; a PCG iteration 2.8 ns per
 /// spring and 3 ns per particle, `12 (h ω)^0.8` iterations (40, 71, 141 and 422 measured at
-/// `h ω` = 4, 8, 17 and 95); a Cholesky factorization and solve of a tet body
+/// `h ω` = 4, 8, 17 and 95) with block-Jacobi, and from
+/// [`MULTIGRID_MIN_PARTICLES`](crate::core::solve::MULTIGRID_MIN_PARTICLES) particles the
+/// multigrid's `2.8 √k` iterations where block-Jacobi takes `k`, each 2.9 times the cost
+/// (27, 33 and 54 iterations against 93, 190 and 304 on the 64² and 128² seed cloths and the
+/// bench cloth, at 2.8–2.9 times block-Jacobi's cost per iteration); a Cholesky factorization and solve of a tet body
 /// `270 ns × particles^1.5` (bunny 2.3 ms, armadillo 2.7 ms); Newton backward Euler 2.5
 /// linearly implicit steps on springs and 2.6 on tets; projective dynamics' ten
 /// iterations, each `3.8 ns × springs × log₂ particles` (the factor's fill, fitted on the
@@ -415,7 +419,14 @@ pub fn step_cost_ns(kind: IntegratorKind, size: BodySize, h_omega: f64) -> f64 {
         270.0 * n.powf(1.5) + 2.0 * eval
     } else {
         let iterations = 12.0 * h_omega.max(1.0).powf(0.8);
-        2.0 * eval + iterations * (2.8 * s + 3.0 * n + 20.0 * t)
+        let per = 2.8 * s + 3.0 * n + 20.0 * t;
+        if size.particles >= crate::core::solve::MULTIGRID_MIN_PARTICLES {
+            // The multigrid preconditioner (the default at this size): `2.8 √k` iterations
+            // where block-Jacobi takes `k`, each 2.9 of block-Jacobi's.
+            2.0 * eval + 2.8 * iterations.sqrt() * 2.9 * per
+        } else {
+            2.0 * eval + iterations * per
+        }
     };
     match kind {
         IntegratorKind::SymplecticEuler | IntegratorKind::ForwardEuler => eval,
