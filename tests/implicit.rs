@@ -846,11 +846,11 @@ fn multigrid_preconditioner_is_symmetric_positive_definite_and_solves() {
             diff <= 1e4 * tol * xs,
             "{name}: |x_mg − x_jacobi| = {diff:e}, |x| = {xs:e}"
         );
-        // Measured 27 and 94 iterations (cloth), the point of the multigrid: it must stay
-        // well ahead.
+        // The point of the multigrid: measured 26 against 83 iterations on the cloth in f32,
+        // 50 against 160 in f64; it must stay at least 2.5 times ahead.
         if name.starts_with("cloth") {
             assert!(
-                3 * im <= ij,
+                5 * im <= 2 * ij,
                 "{name}: multigrid {im} vs block-Jacobi {ij} iterations"
             );
         }
