@@ -407,8 +407,8 @@ pub fn probe(
 /// [`MULTIGRID_MIN_PARTICLES`](crate::core::solve::MULTIGRID_MIN_PARTICLES) particles the
 /// multigrid's `2.8 √k` iterations where block-Jacobi takes `k`, each 2.9 times the cost
 /// (27, 33 and 54 iterations against 93, 190 and 304 on the 64² and 128² seed cloths and the
-/// bench cloth, at 2.8–2.9 times block-Jacobi's cost per iteration); a Cholesky factorization and solve of a tet body
-/// `270 ns × particles^1.5` (bunny 2.3 ms, armadillo 2.7 ms); Newton backward Euler 2.5
+/// bench cloth, at 2.8–2.9 times block-Jacobi's cost per iteration); a Cholesky
+/// factorization and solve of a tet body `270 ns × particles^1.5` (bunny 2.3 ms, armadillo 2.7 ms); Newton backward Euler 2.5
 /// linearly implicit steps on springs and 2.6 on tets; projective dynamics' ten
 /// iterations, each `3.8 ns × springs × log₂ particles` (the factor's fill, fitted on the
 /// seed cloths and the jelly within 5 %).

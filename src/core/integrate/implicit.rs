@@ -47,8 +47,8 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// Linearly implicit (semi-implicit backward) Euler of Baraff & Witkin (1998): one Newton step
 /// of backward Euler,
 /// `(M − h ∂f/∂v − h² ∂f/∂x) Δv = h (f₀ + h ∂f/∂x v₀)`, `v ← v + Δv`, `x ← x + h v`,
-/// solved with PCG (block-Jacobi, or multigrid for large systems) under the constraint filter (pins and prescribed particles
-/// keep `Δv = 0`), or with the sparse Cholesky. Stable far beyond explicit limits, first
+/// solved with PCG (block-Jacobi, or multigrid for large systems) under the constraint filter
+/// (pins and prescribed particles keep `Δv = 0`), or with the sparse Cholesky. Stable far beyond explicit limits, first
 /// order, and it damps: energy is lost at large `h`.
 #[derive(Clone, Debug)]
 pub struct LinearlyImplicitEuler {

@@ -289,6 +289,19 @@ impl Preconditioner {
     }
 }
 
+/// `inv[i] ← diag[i]⁻¹`, the identity where a block is singular or not finite.
+fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
+    inv.resize(diag.len(), Matrix3::IDENTITY);
+    for (inv, d) in inv.iter_mut().zip(diag) {
+        let det = d.determinant();
+        *inv = if det.is_normal() {
+            d.inverse()
+        } else {
+            Matrix3::IDENTITY
+        };
+    }
+}
+
 fn dot(a: &[Vector], b: &[Vector]) -> Scalar {
     a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
 }
@@ -355,15 +368,7 @@ impl Pcg {
         self.active = self.preconditioner.for_size(n);
         match self.active {
             Preconditioner::BlockJacobi => {
-                self.inv_diag.resize(n, Matrix3::IDENTITY);
-                for (inv, d) in self.inv_diag.iter_mut().zip(&a.diag) {
-                    let det = d.determinant();
-                    *inv = if det.is_normal() {
-                        d.inverse()
-                    } else {
-                        Matrix3::IDENTITY
-                    };
-                }
+                invert_blocks(&a.diag, &mut self.inv_diag);
             }
             _ => self.multigrid.setup(a, mask),
         }

@@ -14,12 +14,14 @@
 //!   every block of `A` lands in the block of its two aggregates. The aggregates and where
 //!   each block lands are computed once per structure; each solve only re-sums the values
 //!   (unsmoothed aggregation: no matrix product).
-//! - **Cycle.** A symmetric V-cycle: one forward block Gauss–Seidel sweep, the residual
-//!   restricted (`Pᵀ`), the coarse level's cycle, the correction prolonged (`P`), one backward
-//!   sweep; a dense Cholesky solve on the coarsest level. Forward and backward sweeps are each
-//!   other's adjoints and the coarse solves are symmetric positive definite, so the cycle is a
-//!   symmetric positive definite operator — what conjugate gradients needs of a
-//!   preconditioner — for any symmetric positive definite `A`, with no damping to tune.
+//! - **Cycle.** A symmetric V-cycle: a pre-smoothing step, the residual restricted (`Pᵀ`),
+//!   the coarse level's cycle, the correction prolonged (`P`), a post-smoothing step that is
+//!   the pre-smoothing's adjoint; a dense Cholesky solve on the coarsest level. The finest
+//!   level is smoothed by damped block-Jacobi (only the matrix's own product, no copy of its
+//!   rows; its weight is bounded in [`Multigrid::setup`]), the coarser ones by a forward and
+//!   a backward block Gauss–Seidel sweep. With convergent smoothers and symmetric positive
+//!   definite coarse solves the cycle is a symmetric positive definite operator — what
+//!   conjugate gradients needs of a preconditioner.
 //!
 //! Pinned and prescribed particles (mask zero) are cut loose: their rows and columns are
 //! dropped and their diagonal blocks replaced by the identity, so the cycle returns zero for
@@ -81,15 +83,7 @@ impl Level {
     }
 
     fn invert(&mut self) {
-        self.inv.resize(self.len(), Matrix3::IDENTITY);
-        for (inv, d) in self.inv.iter_mut().zip(&self.diag) {
-            let det = d.determinant();
-            *inv = if det.is_normal() {
-                d.inverse()
-            } else {
-                Matrix3::IDENTITY
-            };
-        }
+        super::invert_blocks(&self.diag, &mut self.inv);
     }
 }
 
@@ -178,7 +172,8 @@ pub struct Multigrid {
     /// The finest level keeps no rows of its own (its products are the matrix's); the
     /// coarser ones do.
     levels: Vec<Level>,
-    /// The coarsest level's Cholesky factor (dense, lower, row-major, `f64`), and its size.
+    /// The coarsest level's Cholesky factor (dense, lower, row-major, `f64`), and whether the
+    /// factorization succeeded (if not, the coarsest level is smoothed instead).
     chol: Vec<f64>,
     dense_ok: bool,
     rhs: Vec<f64>,

@@ -25,8 +25,11 @@ struct FemInput<'a, 'w, 's> {
     /// What the automatic method aims for.
     auto: AutoConfig,
     /// Self-collision, the surface's triangles (empty: the tets' boundary) and which particles
-    /// were torn from which.
+    /// were torn from which (empty: from the body's own record, `torn_origin`).
     self_collision: Option<(SelfCollision, Vec<[u32; 3]>, Vec<u32>)>,
+    /// Each particle split off by tearing → the one it was split from, for bodies with no
+    /// surface to keep that record.
+    torn_origin: &'a HashMap<Entity, Entity>,
     /// Tearing (checked here, applied after each step).
     tearable: Option<Tearable>,
 }
@@ -177,7 +180,11 @@ fn build_body(
     if let Some((sc, triangles, torn_from)) = fem.self_collision {
         layout.self_collision = Some(sc.params());
         layout.surface = triangles;
-        layout.torn_from = torn_from;
+        layout.torn_from = if torn_from.is_empty() {
+            torn_origins(&ents, &index, fem.torn_origin)
+        } else {
+            torn_from
+        };
     }
     let (model, state) = layout.build().map_err(|errs| {
         // The first problem, named by the entity behind the packed index.
@@ -411,12 +418,12 @@ pub(crate) fn prepare(
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
                 auto: auto_settings.map_or(AutoConfig::default(), |a| a.0),
                 self_collision: self_collision.map(|c| {
-                    let (tris, from) = surface.map_or_else(
-                        || (vec![], torn_origins(plist, &bs.torn_origin)),
-                        |s| (s.triangles.clone(), s.torn_from.clone()),
-                    );
+                    let (tris, from) = surface.map_or((vec![], vec![]), |s| {
+                        (s.triangles.clone(), s.torn_from.clone())
+                    });
                     (*c, tris, from)
                 }),
+                torn_origin: &bs.torn_origin,
                 tearable: tearable.map(|t| *t),
             };
             match build_body(
@@ -551,20 +558,18 @@ fn follow_removed_particles(
         .remove::<crate::render::SurfaceVertices>();
 }
 
-/// The packed index each particle of `plist` was torn from (its own when not torn, or when
-/// the one it was torn from is gone), from a body's record by entity; empty when nothing
-/// was torn.
-fn torn_origins(plist: &[Entity], origin: &HashMap<Entity, Entity>) -> Vec<u32> {
+/// The packed index (`index`) each packed particle (`ents`) was torn from: its own when not
+/// torn, or when the one it was torn from is gone; from a body's record by entity; empty
+/// when nothing was torn.
+fn torn_origins(
+    ents: &[Entity],
+    index: &HashMap<Entity, u32>,
+    origin: &HashMap<Entity, Entity>,
+) -> Vec<u32> {
     if origin.is_empty() {
         return vec![];
     }
-    let index: HashMap<Entity, u32> = plist
-        .iter()
-        .enumerate()
-        .map(|(i, &e)| (e, i as u32))
-        .collect();
-    plist
-        .iter()
+    ents.iter()
         .enumerate()
         .map(|(i, e)| {
             origin
