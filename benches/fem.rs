@@ -8,7 +8,7 @@
 //! steps first, so the elements are deformed.
 //!
 //! `cargo bench --no-default-features --bench fem`. Target: the armadillo at
-//! ≤ 8 ms per step with backward Euler on one core.
+//! ≤ 5 ms per step with backward Euler on one core.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]

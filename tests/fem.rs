@@ -849,11 +849,9 @@ fn cantilever_tip_deflection_converges_to_euler_bernoulli() {
     assert!(*errors.last().unwrap() < 0.05, "{errors:?}");
 }
 
-/// CSC417 assignment 3's claim: the small stiff armadillo (0.98 m tall, E = 1 MPa, ν = 0.45) at
-/// h = 1/60, hung by its top 5 % and yanked sideways (20 m/s per metre of height, like a hard
-/// mouse pull). Returns the frames run, whether the driver reported a divergence, and the
-/// largest total energy (kinetic, elastic and gravitational) seen.
-fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64) {
+/// The coarse armadillo, E = 1 MPa, ν = 0.45, hung by its top 5 % and swinging sideways at
+/// `swing` m/s per metre of height.
+fn hung_armadillo(swing: f64) -> (ParticleModel, ParticleState) {
     let mesh =
         TetMesh::from_medit("armadillo_coarse.mesh", &read("armadillo_coarse.mesh")).unwrap();
     let mat = NeoHookean {
@@ -861,9 +859,17 @@ fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64)
         poisson: 0.45,
         density: 1000.0,
     };
-    let (model, state) = bevy_soft_body::core::build::hung_tet_body(&mesh, mat, 20.0)
+    bevy_soft_body::core::build::hung_tet_body(&mesh, mat, swing)
         .build()
-        .unwrap();
+        .unwrap()
+}
+
+/// CSC417 assignment 3's claim: the small stiff armadillo (0.98 m tall, E = 1 MPa, ν = 0.45) at
+/// h = 1/60, hung by its top 5 % and yanked sideways (20 m/s per metre of height, like a hard
+/// mouse pull). Returns the frames run, whether the driver reported a divergence, and the
+/// largest total energy (kinetic, elastic and gravitational) seen.
+fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64) {
+    let (model, state) = hung_armadillo(20.0);
     let mut sim = Simulation::new(
         model,
         state,
@@ -897,6 +903,50 @@ fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64)
     (sim.frame, false, worst, last)
 }
 
+/// Backward Euler as the tet bodies take it (sparse Cholesky, the factorization reused across
+/// Newton iterations) on the swinging armadillo of the `fem` bench. Every step must end
+/// converged, at velocities within the tolerance of Newton's run to its round-off floor (no
+/// tolerance, a fresh factorization every iteration, 12 iterations), from the same state.
+/// In f32 the residual `M⁻¹ ∇Φ` of the lightest particles never falls to the tolerance
+/// (0.3 m/s at the floor), so this holds only because the iteration also stops on the Newton
+/// step's size; and only if a slow step of a reused factorization asks for a fresh one
+/// instead of ending the iteration, and reused steps do not use up the iteration cap (the
+/// first ten steps of the swing then ended unconverged, up to 0.019 m/s from Newton's).
+/// Measured: largest gap 8.7e-4 m/s in f32 (tolerance 1e-3), 1.1e-6 m/s in f64 (1e-5).
+#[test]
+fn modified_newton_converges_every_step_to_newtons_velocities_on_the_armadillo() {
+    use bevy_soft_body::core::integrate::{BackwardEuler, Integrator};
+    use bevy_soft_body::core::solve::LinearSolver;
+    let (model, mut state) = hung_armadillo(2.0);
+    let mut modified = BackwardEuler::new(LinearSolver::cholesky(), 5);
+    modified.reuse_factorization = true;
+    let mut newton = BackwardEuler::new(LinearSolver::cholesky(), 12);
+    newton.tolerance = 0.0;
+    use bevy_soft_body::math::Scalar;
+    let h: Scalar = 1.0 / 60.0;
+    let (mut worst, mut iterations): (Scalar, u32) = (0.0, 0);
+    for k in 0..40 {
+        let t = k as Scalar * h;
+        let mut fast = state.clone();
+        Integrator::<ParticleState, ParticleModel>::step(&mut modified, &model, t, h, &mut fast)
+            .unwrap();
+        let rep = modified.last_newton();
+        assert!(rep.converged, "step {k}: {rep:?}");
+        iterations += rep.iterations;
+        Integrator::<ParticleState, ParticleModel>::step(&mut newton, &model, t, h, &mut state)
+            .unwrap();
+        let gap = fast
+            .v
+            .iter()
+            .zip(&state.v)
+            .map(|(a, b)| (*a - *b).length())
+            .fold(0.0, Scalar::max);
+        assert!(gap <= modified.tolerance, "step {k}: {gap} m/s");
+        worst = worst.max(gap);
+    }
+    println!("40 steps: {iterations} Newton iterations, largest gap to Newton {worst:.2e} m/s");
+}
+
 #[test]
 fn stiff_armadillo_linearly_implicit_diverges_backward_euler_stays_bounded() {
     let (f_lie, div_lie, _, _) = yanked_armadillo(IntegratorKind::LinearlyImplicitEuler, 5.0);
@@ -910,9 +960,10 @@ fn stiff_armadillo_linearly_implicit_diverges_backward_euler_stays_bounded() {
         "linearly implicit Euler should blow up"
     );
     assert!(!div_be && f_be == 300, "backward Euler should run 5 s");
-    // Bounded: Newton is capped at 5 iterations a step and does not converge in the first
-    // frames of so hard a yank (residuals of 1e5 m/s), which lets the energy rise by 15 %
-    // (measured 6064 → 6973 J) before it settles; then it only dissipates (357 J at 5 s).
+    // Bounded: Newton is capped (5 fresh factorizations a step, 10 iterations) and does not
+    // converge in the first frames of so hard a yank (residuals of 1e4 m/s), which could let
+    // the energy rise before it settles; measured, it does not (3675 J after the first step
+    // and at most, 358 J at 5 s). The bound leaves room for a 50 % rise.
     assert!(e_max.is_finite() && e_max <= 1.5 * e0, "{e_max} {e0}");
     assert!(e_end < 0.5 * e0, "{e_end} {e0}");
 }
