@@ -345,3 +345,157 @@ fn scene_files_load_as_assets_and_spawn_bodies() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A game's mesh torn: a 0.8 × 0.4 m sheet with texture coordinates, its top row pinned, the
+/// right half of the row pulled away to the right until the sheet tears down its middle. Beside
+/// it the same cloth (the same builder's scene) as a body drawn by its own `SoftBodySurface`,
+/// torn by the same pull: the game's mesh must draw the same triangles between the same
+/// particles (through the particle each of its vertices shows) — drawn whole, as before, its
+/// triangles on the far side of the cut would still hold the particles on the near side. Every
+/// vertex the tear added must be in the mesh asset, at its particle's position with the texture
+/// coordinate of the vertex it split from, and the index buffer must be the torn triangles.
+#[test]
+fn a_torn_mesh_body_draws_the_cut_its_surface_would_with_split_vertices_that_keep_their_uvs() {
+    use bevy_soft_body::core::build::surface_cloth;
+    let (nx, ny) = (8u32, 4u32);
+    let mut pos = vec![];
+    let mut uv = vec![];
+    for j in 0..=ny {
+        for i in 0..=nx {
+            pos.push([i as f32 * 0.1, -(j as f32) * 0.1, 0.0]);
+            uv.push([i as f32 / nx as f32, j as f32 / ny as f32]);
+        }
+    }
+    let mut tris = vec![];
+    let v = |i: u32, j: u32| j * (nx + 1) + i;
+    for j in 0..ny {
+        for i in 0..nx {
+            tris.push([v(i, j), v(i, j + 1), v(i + 1, j + 1)]);
+            tris.push([v(i, j), v(i + 1, j + 1), v(i + 1, j)]);
+        }
+    }
+    let own = pos.len();
+    let pinned = |_: usize, p: [f32; 3]| p[1] == 0.0;
+    let scene = surface_cloth(&pos, &tris, &SurfaceParams::default(), pinned)
+        .unwrap()
+        .scene;
+    let mut sheet = Mesh::new(PrimitiveTopology::TriangleList, default());
+    sheet.insert_attribute(Mesh::ATTRIBUTE_POSITION, pos);
+    sheet.insert_attribute(Mesh::ATTRIBUTE_UV_0, uv.clone());
+    sheet.insert_indices(Indices::U32(tris.iter().flatten().copied().collect()));
+    let mut app = app();
+    let pole = app
+        .world_mut()
+        .spawn((Transform::default(), GlobalTransform::default()))
+        .id();
+    let (body, twin) = app
+        .world_mut()
+        .run_system_once(move |mut c: Commands| {
+            let body = c
+                .spawn_mesh_body(
+                    &sheet,
+                    &MeshBody {
+                        pins: MeshPins::Predicate(std::sync::Arc::new(move |v, p: Vec3| {
+                            pinned(v, p.to_array())
+                        })),
+                        ..Default::default()
+                    },
+                    SoftBody::default(),
+                )
+                .unwrap();
+            let twin = c.spawn_soft_body(&scene, SoftBody::default()).unwrap();
+            (body, twin)
+        })
+        .unwrap();
+    for b in [body, twin] {
+        app.world_mut()
+            .entity_mut(b)
+            .insert(Tearable { max_strain: 0.3 });
+    }
+    app.update();
+    // The right half of each pinned row follows the pole, at its own positions.
+    for b in [body, twin] {
+        let parts = app
+            .world()
+            .get::<BodyParticles>(b)
+            .unwrap()
+            .entities()
+            .to_vec();
+        for &p in &parts {
+            let x = app.world().get::<Particle>(p).unwrap().position;
+            if app.world().get::<Pinned>(p).is_some() && x.x > 0.45 {
+                app.world_mut().entity_mut(p).insert(Pinned::to(pole, x));
+            }
+        }
+    }
+    for k in 1..=48 {
+        let x = 0.6 * k as f32 / 48.0;
+        *app.world_mut().get_mut::<Transform>(pole).unwrap() = Transform::from_xyz(x, 0.0, 0.0);
+        app.update();
+    }
+    app.update();
+    let w = app.world();
+    let surface = w.get::<SoftBodyMeshSurface>(body).unwrap();
+    let added = surface.split_from.len();
+    assert!(added > 0, "the sheet did not tear");
+    assert_eq!(surface.vertices.len(), own + added);
+    assert!(!surface.torn, "the mesh asset has not followed the tear");
+    // Both bodies' triangles as particle indices (each body's own order), corners sorted.
+    let index = |b: Entity| -> std::collections::HashMap<Entity, u32> {
+        let parts = w.get::<BodyParticles>(b).unwrap().entities();
+        parts
+            .iter()
+            .enumerate()
+            .map(|(i, e)| (*e, i as u32))
+            .collect()
+    };
+    let (ib, it) = (index(body), index(twin));
+    let sorted = |mut t: [u32; 3]| {
+        t.sort_unstable();
+        t
+    };
+    let mut drawn: Vec<[u32; 3]> = surface
+        .triangles
+        .iter()
+        .map(|t| sorted(t.map(|v| ib[&surface.vertices[v as usize]])))
+        .collect();
+    let twin_surface = w
+        .get::<bevy_soft_body::render::SoftBodySurface>(twin)
+        .unwrap();
+    let twin_parts = w.get::<BodyParticles>(twin).unwrap().entities().to_vec();
+    let mut want: Vec<[u32; 3]> = twin_surface
+        .triangles
+        .iter()
+        .map(|t| sorted(t.map(|i| it[&twin_parts[i as usize]])))
+        .collect();
+    assert_eq!(ib.len(), it.len(), "the two bodies tore differently");
+    drawn.sort_unstable();
+    want.sort_unstable();
+    println!(
+        "{added} vertices added; {} particles; {} triangles drawn",
+        ib.len(),
+        drawn.len()
+    );
+    assert_eq!(drawn, want);
+    let mesh = w
+        .resource::<Assets<Mesh>>()
+        .get(&w.get::<Mesh3d>(body).unwrap().0)
+        .unwrap();
+    assert_eq!(mesh.count_vertices(), surface.vertices.len());
+    let uvs = match mesh.attribute(Mesh::ATTRIBUTE_UV_0) {
+        Some(VertexAttributeValues::Float32x2(u)) => u.clone(),
+        _ => panic!("no UVs"),
+    };
+    let at = positions(mesh, Mesh::ATTRIBUTE_POSITION);
+    for (k, &from) in surface.split_from.iter().enumerate() {
+        assert_eq!(uvs[own + k], uv[from as usize], "vertex {}", own + k);
+        let p = w
+            .get::<Particle>(surface.vertices[own + k])
+            .unwrap()
+            .position;
+        assert!(Vec3::from_array(at[own + k]).distance(p) < 1e-6);
+    }
+    let indices: Vec<u32> = mesh.indices().unwrap().iter().map(|i| i as u32).collect();
+    let want: Vec<u32> = surface.triangles.iter().flatten().copied().collect();
+    assert_eq!(indices, want);
+}

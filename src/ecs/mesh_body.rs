@@ -92,6 +92,18 @@ pub struct SoftBodyMeshSurface {
     /// The particle each vertex of the mesh shows.
     #[entities]
     pub vertices: Vec<Entity>,
+    /// The mesh's triangles (indices of its vertices): what its index buffer holds, kept here
+    /// so that a tear ([`Tearable`]) splits them as it splits a [`SoftBodySurface`]'s
+    /// (empty: the mesh is drawn whole).
+    ///
+    /// [`SoftBodySurface`]: crate::render::SoftBodySurface
+    pub triangles: Vec<[u32; 3]>,
+    /// For each vertex a tear added, in order after the mesh's own, the vertex it copies
+    /// (texture coordinates, colours, every attribute but position and normal).
+    pub split_from: Vec<u32>,
+    /// True while a tear's new vertices and triangles are not yet in the mesh asset.
+    #[reflect(ignore)]
+    pub torn: bool,
     /// Colour of the default material (when the body has no `MeshMaterial3d`).
     pub color: Color,
     /// The mesh to deform (taken when its asset is made).
@@ -216,6 +228,9 @@ pub(crate) fn spawn_mesh_body(
         .collect();
     commands.entity(root).insert(SoftBodyMeshSurface {
         vertices,
+        triangles: tris,
+        split_from: vec![],
+        torn: false,
         color: params.color.unwrap_or(Color::srgb(0.8, 0.75, 0.7)),
         source: Some(Arc::new(mesh.clone())),
     });

@@ -719,6 +719,12 @@ fn sync_mesh_surfaces(
             }
             continue;
         };
+        if surface.torn
+            && let Some(mut mesh) = meshes.get_mut(&m.0)
+        {
+            follow_tear(&mut mesh, &surface);
+            surface.torn = false;
+        }
         if shown.current(e, bs, debug.interpolate) {
             continue; // asleep: the mesh already shows it
         }
@@ -776,6 +782,85 @@ fn sync_mesh_surfaces(
             warn!("soft body {e}: tangents not regenerated: {err}");
         }
     }
+}
+
+/// A game's mesh after a tear: the vertices the tear added (each a copy of the vertex it
+/// split from, every attribute) and the torn triangles as its index buffer.
+fn follow_tear(mesh: &mut Mesh, surface: &crate::ecs::SoftBodyMeshSurface) {
+    let own = surface.vertices.len() - surface.split_from.len();
+    let have = mesh.count_vertices();
+    if have >= own && have < surface.vertices.len() {
+        let from = &surface.split_from[have - own..];
+        for (_, values) in mesh.attributes_mut() {
+            push_vertex_copies(values, from);
+        }
+    }
+    mesh.insert_indices(Indices::U32(
+        surface.triangles.iter().flatten().copied().collect(),
+    ));
+}
+
+/// Appends to an attribute's values a copy of the value at each of `from`.
+fn push_vertex_copies(values: &mut VertexAttributeValues, from: &[u32]) {
+    macro_rules! copies {
+        ($($v:ident),*) => {
+            match values {
+                $(VertexAttributeValues::$v(a) => {
+                    for &i in from {
+                        let x = a[i as usize];
+                        a.push(x);
+                    }
+                })*
+            }
+        };
+    }
+    copies!(
+        Uint8,
+        Uint8x2,
+        Uint8x4,
+        Sint8,
+        Sint8x2,
+        Sint8x4,
+        Unorm8,
+        Unorm8x2,
+        Unorm8x4,
+        Snorm8,
+        Snorm8x2,
+        Snorm8x4,
+        Uint16,
+        Uint16x2,
+        Uint16x4,
+        Sint16,
+        Sint16x2,
+        Sint16x4,
+        Unorm16,
+        Unorm16x2,
+        Unorm16x4,
+        Snorm16,
+        Snorm16x2,
+        Snorm16x4,
+        Float16,
+        Float16x2,
+        Float16x4,
+        Float32,
+        Float32x2,
+        Float32x3,
+        Float32x4,
+        Uint32,
+        Uint32x2,
+        Uint32x3,
+        Uint32x4,
+        Sint32,
+        Sint32x2,
+        Sint32x3,
+        Sint32x4,
+        Float64,
+        Float64x2,
+        Float64x3,
+        Float64x4,
+        Unorm8x4Bgra,
+        Unorm10_10_10_2
+    );
 }
 
 fn collider_meshes(

@@ -327,8 +327,9 @@ pub(super) fn contact_between(
 /// past their limit break (their entities despawned), and the surface tears along them
 /// ([`crate::core::tear`]): each split particle gets a copy entity (same position and
 /// velocity, its share of the mass, the same pin), springs on the copy's side are moved to
-/// it, and the surface's triangles and texture coordinates follow. The body is rebuilt at
-/// the next step; a [`SoftBodyTorn`] names what broke.
+/// it, and the surface's triangles and texture coordinates follow (a game's mesh,
+/// [`crate::ecs::SoftBodyMeshSurface`], gets a vertex of its own for each corner moved to a
+/// copy). The body is rebuilt at the next step; a [`SoftBodyTorn`] names what broke.
 #[allow(clippy::type_complexity)]
 pub(super) fn tear(
     mut bodies: Query<(
@@ -336,7 +337,7 @@ pub(super) fn tear(
         &Tearable,
         &mut BodySim,
         Option<&mut crate::render::SoftBodySurface>,
-        Has<crate::ecs::SoftBodyMeshSurface>,
+        Option<&mut crate::ecs::SoftBodyMeshSurface>,
     )>,
     mut particles: Query<(&mut Particle, Option<&Pinned>)>,
     mut springs: Query<&mut Spring>,
@@ -374,9 +375,19 @@ pub(super) fn tear(
             continue;
         }
         let corners: Vec<[u32; 4]> = packed_tets.iter().map(|t| t.v).collect();
+        // The game's mesh: its triangles between distinct particles, in particle indices (the
+        // mesh's own, and which of them they are), so the tear splits them too.
+        let game_mesh: Option<(Vec<usize>, Vec<[u32; 3]>)> = match (&surface, &mesh_surface) {
+            (None, Some(ms)) if !ms.triangles.is_empty() => mesh_triangles(ms, &bs.particles),
+            _ => None,
+        };
         let mut mesh = TearMesh::new(
             packed.iter().map(|s| [s.i, s.j]).collect(),
-            surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
+            match (&surface, &game_mesh) {
+                (Some(s), _) => s.triangles.clone(),
+                (None, Some((_, t))) => t.clone(),
+                _ => vec![],
+            },
         )
         .with_tets(corners);
         let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
@@ -495,7 +506,7 @@ pub(super) fn tear(
             && (!torn.copies.is_empty() || !torn.tets_removed.is_empty())
         {
             let surf = &mut *surf;
-            surf.triangles = mesh.triangles;
+            surf.triangles = std::mem::take(&mut mesh.triangles);
             if !surf.uvs.is_empty() && surf.uvs.len() <= n {
                 // Particles the surface does not show (a mouse grab's handle) have none.
                 surf.uvs.resize(n, [0.0; 2]);
@@ -514,10 +525,17 @@ pub(super) fn tear(
                 bs.torn_origin.insert(copy, parent);
             }
         }
-        if mesh_surface && (!torn.copies.is_empty() || !torn.tets_removed.is_empty()) {
-            warn_once!(
-                "soft body {body_e}: Tearable with a SoftBodyMeshSurface: the physics tears, but the game's mesh is drawn whole (only a SoftBodySurface is split)"
-            );
+        if let Some(mut ms) = mesh_surface
+            && !torn.copies.is_empty()
+        {
+            match &game_mesh {
+                Some((which, before)) => {
+                    split_mesh_surface(&mut ms, which, before, &mesh.triangles, &origin, &entity)
+                }
+                None => warn_once!(
+                    "soft body {body_e}: Tearable with a SoftBodyMeshSurface whose vertices are not all the body's particles: the physics tears, but the game's mesh is drawn whole"
+                ),
+            }
         }
         bs.torn = true;
         let event = SoftBodyTorn {
@@ -529,4 +547,83 @@ pub(super) fn tear(
         commands.trigger(event.clone());
         torn_msgs.write(event);
     }
+}
+
+/// A game's mesh's triangles in packed particle indices: the indices of the mesh triangles
+/// whose corners are three distinct particles of the body, and those triangles. `None` when
+/// a vertex shows no particle of the body.
+fn mesh_triangles(
+    ms: &crate::ecs::SoftBodyMeshSurface,
+    particles: &[Entity],
+) -> Option<(Vec<usize>, Vec<[u32; 3]>)> {
+    let index: HashMap<Entity, u32> = particles
+        .iter()
+        .enumerate()
+        .map(|(i, e)| (*e, i as u32))
+        .collect();
+    let mut which = Vec::with_capacity(ms.triangles.len());
+    let mut tris = Vec::with_capacity(ms.triangles.len());
+    for (t, tri) in ms.triangles.iter().enumerate() {
+        let mut p = [0u32; 3];
+        for c in 0..3 {
+            p[c] = *index.get(ms.vertices.get(tri[c] as usize)?)?;
+        }
+        if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
+            which.push(t);
+            tris.push(p);
+        }
+    }
+    Some((which, tris))
+}
+
+/// Follows a tear on a game's mesh: `before` are its triangles `which` in particle indices as
+/// the tear got them, `after` what the tear made of them (the same order, less those it
+/// removed; `origin` maps every particle index, copies included, to the one it was split
+/// from). A corner moved to a copy gets a vertex of its own for that copy (one per mesh
+/// vertex and copy: triangles that keep a seam keep it), copying the vertex it split from.
+fn split_mesh_surface(
+    ms: &mut crate::ecs::SoftBodyMeshSurface,
+    which: &[usize],
+    before: &[[u32; 3]],
+    after: &[[u32; 3]],
+    origin: &[usize],
+    entity: &[Entity],
+) {
+    let own = ms.vertices.len() - ms.split_from.len();
+    let mut added: HashMap<(u32, u32), u32> = HashMap::new();
+    let mut removed = vec![false; ms.triangles.len()];
+    let mut k = 0;
+    for (&t, b) in which.iter().zip(before) {
+        let a = after.get(k);
+        let kept = a.is_some_and(|a| (0..3).all(|c| origin[a[c] as usize] == b[c] as usize));
+        if !kept {
+            removed[t] = true;
+            continue;
+        }
+        let a = after[k];
+        k += 1;
+        for c in 0..3 {
+            if a[c] == b[c] {
+                continue;
+            }
+            let v = ms.triangles[t][c];
+            let nv = *added.entry((v, a[c])).or_insert_with(|| {
+                let source = if (v as usize) < own {
+                    v
+                } else {
+                    ms.split_from[v as usize - own]
+                };
+                ms.vertices.push(entity[a[c] as usize]);
+                ms.split_from.push(source);
+                (ms.vertices.len() - 1) as u32
+            });
+            ms.triangles[t][c] = nv;
+        }
+    }
+    let mut t = 0;
+    ms.triangles.retain(|_| {
+        t += 1;
+        !removed[t - 1]
+    });
+    ms.torn = true;
 }
