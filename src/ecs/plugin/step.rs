@@ -390,6 +390,7 @@ pub(super) fn tear(
             },
         )
         .with_tets(corners);
+        let triangles_before = mesh.triangles.len();
         let mut mass: Vec<f64> = sim.system.mass().iter().map(|&m| m as f64).collect();
         let torn = mesh.tear_with_tets(
             &by_strain(&over),
@@ -501,9 +502,14 @@ pub(super) fn tear(
                 commands.entity(te).despawn();
             }
         }
+        // The surface changed: split, or triangles gone (a hole where a surface spring broke
+        // with neither end splittable, or tets removed).
+        let reshaped = !torn.copies.is_empty()
+            || !torn.tets_removed.is_empty()
+            || mesh.triangles.len() != triangles_before;
         let has_surface = surface.is_some();
         if let Some(mut surf) = surface
-            && (!torn.copies.is_empty() || !torn.tets_removed.is_empty())
+            && reshaped
         {
             let surf = &mut *surf;
             surf.triangles = std::mem::take(&mut mesh.triangles);
@@ -526,7 +532,7 @@ pub(super) fn tear(
             }
         }
         if let Some(mut ms) = mesh_surface
-            && !torn.copies.is_empty()
+            && reshaped
         {
             match &game_mesh {
                 Some((which, before)) => {
