@@ -2,7 +2,8 @@
 //! beside it: a curved 16 × 22-quad sheet with a UV seam down its middle and its top rim
 //! painted red) becomes a cloth with `SoftBodyGltf`: seam welded, rim pinned by its vertex
 //! colour to a banner pole that sways from side to side, in a breeze. The mesh is drawn as the
-//! file made it (its material, vertex colours and UVs), deformed. Linearly implicit Euler at
+//! file made it (its material, vertex colours and UVs), deformed; pulled hard (past 50 %
+//! strain) it tears, and the file's mesh opens along the cut. Linearly implicit Euler at
 //! one step per 1/60 s frame by default (`-- LETTER H` picks another).
 //!
 //! Keys: Space pause, N step, R reset, W wind, G wireframe, E/S/T/M/K/A/I/D/B/X/P integrator;
@@ -106,6 +107,15 @@ fn main() {
                     distance: 3.0,
                 },
             );
+        },
+    );
+    // A hard pull tears the cape (strained past 50 %): the file's mesh opens along the cut.
+    app.add_systems(
+        Update,
+        |mut c: Commands, spawned: Query<&SoftBodyGltfSpawned, Added<SoftBodyGltfSpawned>>| {
+            for s in &spawned {
+                c.entity(s.0).insert(Tearable { max_strain: 0.5 });
+            }
         },
     );
     app.run();
