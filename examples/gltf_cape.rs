@@ -90,6 +90,8 @@ fn main() {
                             coefficient: 1.2e-3,
                             ..Default::default()
                         }),
+                        // A hard pull tears it: the file's mesh opens along the cut.
+                        tearing: Some(Tearable { max_strain: 0.5 }),
                         ..Default::default()
                     },
                     pin_nodes: vec![],
@@ -107,15 +109,6 @@ fn main() {
                     distance: 3.0,
                 },
             );
-        },
-    );
-    // A hard pull tears the cape (strained past 50 %): the file's mesh opens along the cut.
-    app.add_systems(
-        Update,
-        |mut c: Commands, spawned: Query<&SoftBodyGltfSpawned, Added<SoftBodyGltfSpawned>>| {
-            for s in &spawned {
-                c.entity(s.0).insert(Tearable { max_strain: 0.5 });
-            }
         },
     );
     app.run();

@@ -273,10 +273,15 @@ fn meshes_the_builder_cannot_use_are_errors_saying_why() {
             };
             let mut bad_index = sheet();
             bad_index.insert_indices(Indices::U32(vec![0, 1, 999]));
+            let no_limit = MeshBody {
+                tearing: Some(Tearable { max_strain: 0.0 }),
+                ..Default::default()
+            };
             [
                 c.spawn_mesh_body(&lines, &MeshBody::default(), SoftBody::default()),
                 c.spawn_mesh_body(&sheet(), &no_colours, SoftBody::default()),
                 c.spawn_mesh_body(&bad_index, &MeshBody::default(), SoftBody::default()),
+                c.spawn_mesh_body(&sheet(), &no_limit, SoftBody::default()),
             ]
             .into_iter()
             .map(|r| r.unwrap_err().to_string())
@@ -287,6 +292,7 @@ fn meshes_the_builder_cannot_use_are_errors_saying_why() {
     assert!(errors[0].contains("triangle list"), "{}", errors[0]);
     assert!(errors[1].contains("vertex colours"), "{}", errors[1]);
     assert!(errors[2].contains("999"), "{}", errors[2]);
+    assert!(errors[3].contains("tearing.max_strain"), "{}", errors[3]);
 }
 
 #[test]
@@ -398,6 +404,7 @@ fn a_torn_mesh_body_draws_the_cut_its_surface_would_with_split_vertices_that_kee
                         pins: MeshPins::Predicate(std::sync::Arc::new(move |v, p: Vec3| {
                             pinned(v, p.to_array())
                         })),
+                        tearing: Some(Tearable { max_strain: 0.3 }),
                         ..Default::default()
                     },
                     SoftBody::default(),
@@ -407,11 +414,9 @@ fn a_torn_mesh_body_draws_the_cut_its_surface_would_with_split_vertices_that_kee
             (body, twin)
         })
         .unwrap();
-    for b in [body, twin] {
-        app.world_mut()
-            .entity_mut(b)
-            .insert(Tearable { max_strain: 0.3 });
-    }
+    app.world_mut()
+        .entity_mut(twin)
+        .insert(Tearable { max_strain: 0.3 });
     app.update();
     // The right half of each pinned row follows the pole, at its own positions.
     for b in [body, twin] {

@@ -79,6 +79,10 @@ pub struct MeshBody {
     pub attach: Option<(Entity, GlobalTransform)>,
     /// Wind on this body.
     pub wind: Option<Wind>,
+    /// Tearing ([`Tearable`]): springs strained past the limit break, and the mesh opens
+    /// along the cut (vertices split, their attributes kept). A limit that is not positive
+    /// is an error naming `tearing.max_strain`.
+    pub tearing: Option<Tearable>,
     /// Colour of the default material when the body has no `MeshMaterial3d`.
     pub color: Option<Color>,
 }
@@ -203,6 +207,7 @@ pub(crate) fn spawn_mesh_body(
     let built = surface_cloth(&world, &tris, &params.cloth, pinned).map_err(|e| mesh_error(e.0))?;
     let mut scene = built.scene;
     scene.wind = params.wind;
+    scene.tearing = params.tearing.map(|t| t.params());
     scene.surface = None; // drawn with the mesh itself
     let (root, particles) = spawn_scene(commands, &scene, body)?;
     if let Some((target, at)) = params.attach {

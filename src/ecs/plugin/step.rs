@@ -539,7 +539,7 @@ pub(super) fn tear(
                     split_mesh_surface(&mut ms, which, before, &mesh.triangles, &origin, &entity)
                 }
                 None => warn_once!(
-                    "soft body {body_e}: Tearable with a SoftBodyMeshSurface whose vertices are not all the body's particles: the physics tears, but the game's mesh is drawn whole"
+                    "soft body {body_e}: Tearable with a SoftBodyMeshSurface that lists no triangles, or shows something other than the body's particles: the physics tears, but the game's mesh is drawn whole"
                 ),
             }
         }
