@@ -917,12 +917,12 @@ fn yanked_armadillo(kind: IntegratorKind, seconds: f64) -> (u64, bool, f64, f64)
 fn modified_newton_converges_every_step_to_newtons_velocities_on_the_armadillo() {
     use bevy_soft_body::core::integrate::{BackwardEuler, Integrator};
     use bevy_soft_body::core::solve::LinearSolver;
+    use bevy_soft_body::math::Scalar;
     let (model, mut state) = hung_armadillo(2.0);
     let mut modified = BackwardEuler::new(LinearSolver::cholesky(), 5);
     modified.reuse_factorization = true;
     let mut newton = BackwardEuler::new(LinearSolver::cholesky(), 12);
     newton.tolerance = 0.0;
-    use bevy_soft_body::math::Scalar;
     let h: Scalar = 1.0 / 60.0;
     let (mut worst, mut iterations): (Scalar, u32) = (0.0, 0);
     for k in 0..40 {

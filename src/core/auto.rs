@@ -401,17 +401,18 @@ pub fn probe(
 /// Model cost of one step of `kind` on a body of `size` at `h ω` (ns), fitted to the fixed
 /// choices the `auto` example times (f32, one core, each scene from rest; `docs/BENCHMARKS.md`
 /// has the table): a symplectic Euler step 2.8 ns per spring (seed cloths 16² to 64², the
-/// bench cloth, within 10 %) and 11.3 ns per tet (the bunny); RK4 four of those; a PCG iteration 2.8 ns per
-/// spring and 3 ns per particle, `12 (h ω)^0.8` iterations (40, 71, 141 and 422 measured at
-/// `h ω` = 4, 8, 17 and 95) with block-Jacobi, and from
+/// bench cloth, within 10 %) and 11.3 ns per tet (the bunny); RK4 four of those; a PCG
+/// iteration 2.8 ns per spring and 3 ns per particle, `12 (h ω)^0.8` iterations (40, 71, 141
+/// and 422 measured at `h ω` = 4, 8, 17 and 95) with block-Jacobi, and from
 /// [`MULTIGRID_MIN_PARTICLES`](crate::core::solve::MULTIGRID_MIN_PARTICLES) particles the
 /// multigrid's `2.8 √k` iterations where block-Jacobi takes `k`, each 2.9 times the cost
 /// (27, 33 and 54 iterations against 93, 190 and 304 on the 64² and 128² seed cloths and the
 /// bench cloth, at 2.8–2.9 times block-Jacobi's cost per iteration); a Cholesky
-/// factorization and solve of a tet body `270 ns × particles^1.5` (bunny 2.3 ms, armadillo 2.7 ms); Newton backward Euler 2.5
-/// linearly implicit steps on springs and 1.5 on tets (bunny 1.47, armadillo 1.50); projective dynamics' ten
-/// iterations, each `3.8 ns × springs × log₂ particles` (the factor's fill, fitted on the
-/// seed cloths and the jelly within 5 %).
+/// factorization and solve of a tet body `270 ns × particles^1.5` (bunny 2.3 ms, armadillo
+/// 2.7 ms); Newton backward Euler 2.5 linearly implicit steps on springs and 1.5 on tets
+/// (bunny 1.47, armadillo 1.50); projective dynamics' ten iterations, each
+/// `3.8 ns × springs × log₂ particles` (the factor's fill, fitted on the seed cloths and the
+/// jelly within 5 %).
 pub fn step_cost_ns(kind: IntegratorKind, size: BodySize, h_omega: f64) -> f64 {
     let (n, s, t) = (size.particles as f64, size.springs as f64, size.tets as f64);
     let eval = 2.8 * s + 11.3 * t + 4.0 * n;

@@ -48,8 +48,8 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// of backward Euler,
 /// `(M − h ∂f/∂v − h² ∂f/∂x) Δv = h (f₀ + h ∂f/∂x v₀)`, `v ← v + Δv`, `x ← x + h v`,
 /// solved with PCG (block-Jacobi, or multigrid for large systems) under the constraint filter
-/// (pins and prescribed particles keep `Δv = 0`), or with the sparse Cholesky. Stable far beyond explicit limits, first
-/// order, and it damps: energy is lost at large `h`.
+/// (pins and prescribed particles keep `Δv = 0`), or with the sparse Cholesky. Stable far
+/// beyond explicit limits, first order, and it damps: energy is lost at large `h`.
 #[derive(Clone, Debug)]
 pub struct LinearlyImplicitEuler {
     /// The linear solver (PCG by default: tolerance, iteration cap).
@@ -282,9 +282,9 @@ pub struct NewtonReport {
 /// particle's velocity correction is below [`BackwardEuler::tolerance`] (m/s): the residual's
 /// `M⁻¹ ∇Φ`, or the Newton step's own (the step's largest entry, as in Li et al. 2020,
 /// *Incremental Potential Contact*, Algorithm 1; a step that small is taken whole, without a
-/// line search). The
-/// Hessian `M + h D + h² K` is projected to positive definite per spring by default, so every
-/// Newton direction descends. Fully implicit: it dissipates energy and is stable at any `h`.
+/// line search). The Hessian `M + h D + h² K` is projected to positive definite per spring by
+/// default, so every Newton direction descends. Fully implicit: it dissipates energy and is
+/// stable at any `h`.
 #[derive(Clone, Debug)]
 pub struct BackwardEuler {
     /// Iteration cap per step (with [`BackwardEuler::reuse_factorization`], the cap on
@@ -456,11 +456,10 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         loop {
             let gnorm = masked_norm(&self.g, &self.mask);
             // A reused factorization converges linearly: its slow step calls for a fresh one
-            // (below), not for giving up. And only near the minimum
-            // (the gradient already below a tenth of the step's first) does a full Newton step
-            // that fails to halve it mean round-off: farther out the gradient may grow while
-            // Φ falls (the swinging armadillo's first step: 5.0 → 6.3 with a 1.6 m/s
-            // correction still to come).
+            // (below), not for giving up. And only near the minimum (the gradient already
+            // below a tenth of the step's first) does a full Newton step that fails to halve it
+            // mean round-off: farther out the gradient may grow while Φ falls (the swinging
+            // armadillo's first step: 5.0 → 6.3 with a 1.6 m/s correction still to come).
             let g0 = rep.gradient_norms.first().copied().unwrap_or(gnorm);
             if full_step
                 && !last_reused

@@ -378,7 +378,7 @@ pub(super) fn tear(
         // The game's mesh: its triangles between distinct particles, in particle indices (the
         // mesh's own, and which of them they are), so the tear splits them too.
         let game_mesh: Option<(Vec<usize>, Vec<[u32; 3]>)> = match (&surface, &mesh_surface) {
-            (None, Some(ms)) if !ms.triangles.is_empty() => mesh_triangles(ms, &bs.particles),
+            (None, Some(ms)) if !ms.triangles.is_empty() => mesh_triangles(ms, bs),
             _ => None,
         };
         let mut mesh = TearMesh::new(
@@ -560,19 +560,14 @@ pub(super) fn tear(
 /// a vertex shows no particle of the body.
 fn mesh_triangles(
     ms: &crate::ecs::SoftBodyMeshSurface,
-    particles: &[Entity],
+    bs: &BodySim,
 ) -> Option<(Vec<usize>, Vec<[u32; 3]>)> {
-    let index: HashMap<Entity, u32> = particles
-        .iter()
-        .enumerate()
-        .map(|(i, e)| (*e, i as u32))
-        .collect();
     let mut which = Vec::with_capacity(ms.triangles.len());
     let mut tris = Vec::with_capacity(ms.triangles.len());
     for (t, tri) in ms.triangles.iter().enumerate() {
         let mut p = [0u32; 3];
         for c in 0..3 {
-            p[c] = *index.get(ms.vertices.get(tri[c] as usize)?)?;
+            p[c] = bs.index_of(*ms.vertices.get(tri[c] as usize)?)? as u32;
         }
         if p[0] != p[1] && p[1] != p[2] && p[0] != p[2] {
             which.push(t);
@@ -600,13 +595,13 @@ fn split_mesh_surface(
     let mut removed = vec![false; ms.triangles.len()];
     let mut k = 0;
     for (&t, b) in which.iter().zip(before) {
-        let a = after.get(k);
-        let kept = a.is_some_and(|a| (0..3).all(|c| origin[a[c] as usize] == b[c] as usize));
-        if !kept {
+        let Some(&a) = after
+            .get(k)
+            .filter(|a| (0..3).all(|c| origin[a[c] as usize] == b[c] as usize))
+        else {
             removed[t] = true;
             continue;
-        }
-        let a = after[k];
+        };
         k += 1;
         for c in 0..3 {
             if a[c] == b[c] {
