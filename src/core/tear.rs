@@ -893,7 +893,12 @@ pub fn tear_scene(
     }
     let n_springs = scene.springs.len();
     for &(k, [a, b]) in &torn.added {
-        let mut sp = scene.springs[k].clone();
+        // Each side keeps one of the edge's two triangles: each spring takes half of the
+        // edge's stiffness and damping, so the split stores no energy the edge did not.
+        let sp = &mut scene.springs[k];
+        sp.stiffness *= 0.5;
+        sp.damping *= 0.5;
+        let mut sp = sp.clone();
         sp.a = a as usize;
         sp.b = b as usize;
         scene.springs.push(sp);

@@ -465,11 +465,15 @@ pub(super) fn tear(
                 s.b = entity[b as usize];
             }
         }
-        // The split-off side's own springs along edges on the cut: copies of the originals.
+        // The split-off side's own springs along edges on the cut: each side keeps one of
+        // the edge's two triangles, so the original and its copy take half of its stiffness
+        // and damping each (the split stores no energy the edge did not).
         for &(k, [a, b]) in &torn.added {
             if let Some(&se) = bs.packed_springs.get(k)
-                && let Ok(s) = springs.get(se)
+                && let Ok(mut s) = springs.get_mut(se)
             {
+                s.stiffness *= 0.5;
+                s.damping *= 0.5;
                 let mut copy = *s;
                 copy.a = entity[a as usize];
                 copy.b = entity[b as usize];
