@@ -704,7 +704,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
             c.resolve(t, h, &mut state.x, &mut state.v, &self.inv_mass);
         }
         if let Some(sc) = &mut self.self_contact
-            && sc.advance(h, &state.v)
+            && sc.advance(h, &state.x, &state.v)
         {
             Self::self_contact_pass(sc, &self.colliders, &self.inv_mass, t, state);
         }

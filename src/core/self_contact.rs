@@ -29,14 +29,17 @@
 //! particles (inverse mass zero) are never moved; particles resting on a collider count
 //! [`SUPPORT_MASS`] times heavier.
 //!
-//! Passes run when the surface's parts may have come [`PASS_TRAVEL`] thicknesses closer since
-//! the last one, and at the end of every frame (the collision step spans the internal
-//! dynamics' steps, as in Bridson et al.), so each pass sees short motions and every frame
+//! Passes run when the candidate pairs (what the last search found) may have come
+//! [`PASS_TRAVEL`] thicknesses closer since the last one (more, for pairs that were farther
+//! than the proximity band), when a vertex has left the box the last search gave it, and at
+//! the end of every frame (the collision step spans the internal dynamics' steps, as in
+//! Bridson et al.), so each pass sees the pairs that can touch make short motions, parts
+//! of the surface far from each other need no pass however fast they move, and every frame
 //! ends free of intersections. The geometry is computed in `f64` whatever [`Scalar`] is. The
 //! broad phase is a bounding-volume hierarchy of swept boxes with normal-cone culling of flat
-//! patches (`tree`); its candidate pairs are kept across passes while every vertex stays
-//! within its box's margin relative to the surface's mean motion (a Verlet list) and the
-//! patches it culled stay flat.
+//! patches (`tree`); its candidate pairs are kept across passes while every vertex stays near
+//! the motion it had at the search, relative to the surface's mean (a Verlet list along the
+//! motion: see [`AHEAD`]), and the patches it culled stay flat.
 
 mod tree;
 
@@ -309,13 +312,26 @@ impl SelfContactReport {
     }
 }
 
-/// A pass runs once the surface's parts may have come this many thicknesses closer since the
-/// last (and at each frame's end).
+/// A pass runs once a candidate pair within the proximity band may have come this many
+/// thicknesses closer since the last (a pair beyond it, by as much more as it was beyond; see
+/// [`SelfContact::advance`]), and at each frame's end.
 pub const PASS_TRAVEL: f64 = 0.5;
 
-/// How far (in thicknesses) each vertex may move, relative to the surface's mean, before the
-/// broad phase searches again.
+/// How far (in thicknesses, in each coordinate) each vertex may stray from its expected
+/// motion (see [`AHEAD`]) before the broad phase searches again.
 pub const BROAD_GROW: f64 = 0.5;
+
+/// The search's horizon: after a search each vertex is expected to go on at its velocity
+/// relative to the surface's mean, for [`AHEAD_PASSES`] passes as long as the searching one,
+/// or until the fastest has gone this many thicknesses, whichever is sooner; the candidates
+/// are kept while every vertex stays within [`BROAD_GROW`] of that motion. A part that swings
+/// or slides keeps to it for several passes (the 64² draping cloth searches 7.8 times a frame
+/// instead of 18.3 with boxes around the paths alone), and parts moving together keep their
+/// distance, so their pairs are not candidates.
+pub const AHEAD: f64 = 2.0;
+
+/// See [`AHEAD`].
+pub const AHEAD_PASSES: f64 = 8.0;
 
 /// Pairs closer than this many thicknesses at a pass's start stop approaching (with
 /// friction). Wider than the thickness the end of a pass restores: a pair held at the
@@ -356,8 +372,6 @@ pub struct SelfContact {
     start: Vec<Vector>,
     /// Time since the last pass.
     since: Scalar,
-    /// A bound on how much closer any two parts of the surface came since the last pass.
-    travel: Scalar,
     /// Particles resting on colliders (empty: none marked).
     support: Vec<bool>,
     s: Scratch,
@@ -374,10 +388,11 @@ struct Scratch {
     tree: SurfaceTree,
     /// Candidate pairs with their distance at the start of the step.
     pairs: Vec<(Pair, f64)>,
-    vbox: Vec<(DVec3, DVec3)>,
     /// Ends of the surface vertices' paths over the pass (`p0 + u τ`), as of the last
     /// broad-phase check.
     p1: Vec<DVec3>,
+    /// Where each vertex is headed at the end of the last search's horizon (see [`AHEAD`]).
+    p2: Vec<DVec3>,
     /// Changes made to `u` (counted), and the count when the culled patches were last known
     /// to be flat along the paths it gives (`u64::MAX`: not since the pass began).
     edits: u64,
@@ -393,12 +408,23 @@ struct Scratch {
     resumed: u32,
     hits: Vec<[u32; 4]>,
     zone_sum: Vec<ZoneSum>,
-    /// The average velocities the candidate pairs were found with (`None`: none found yet
-    /// this step).
-    vcore: Vec<(DVec3, DVec3)>,
-    /// The surface's mean position at the start of the pass that last searched.
-    broad_ref: DVec3,
     broad_valid: bool,
+    /// Per particle: how far it may travel relative to the surface's mean motion before the
+    /// next pass is due (infinite: in no candidate pair), and how far it has since the last
+    /// pass.
+    budget: Vec<Scalar>,
+    travel: Vec<Scalar>,
+    /// Per particle, as of the last search: where it was at the end of that pass and its
+    /// velocity then relative to the surface's mean (its motion is expected to stay within
+    /// [`BROAD_GROW`] thicknesses of `base + w τ` for `τ` up to `tube_len` after that
+    /// pass's end, relative to the mean position `tube_ref`); `clock` is `τ` at the end of
+    /// the current pass. The same in `Scalar` for [`SelfContact::advance`]'s check.
+    tube: Vec<(DVec3, DVec3)>,
+    tube_ref: DVec3,
+    tube_len: f64,
+    clock: f64,
+    tube_s: Vec<(Vector, Vector)>,
+    tube_ref_s: Vector,
     searches: u32,
     tested: u64,
 }
@@ -457,30 +483,54 @@ impl SelfContact {
         self.start.clear();
         self.start.extend_from_slice(x);
         self.since = 0.0;
-        self.travel = 0.0;
     }
 
-    /// After a step of length `h` with end velocities `v`: true when a pass is due, i.e. the
-    /// parts of the surface may have come closer by more than [`PASS_TRAVEL`] thicknesses
-    /// since the last one (twice the fastest particle's speed relative to the surface's mean
-    /// velocity, times the time), so every pass sees motions short against the thickness
-    /// whatever the step.
-    pub fn advance(&mut self, h: Scalar, v: &[Vector]) -> bool {
-        if self.start.len() != v.len() {
+    /// After a step of length `h` to positions `x` with end velocities `v`: true when a pass
+    /// is due. A candidate pair (one the last search found) at distance `d` when the last
+    /// pass ended is due once its parts may have come `max(d − PROXIMITY·thickness, 0) +
+    /// PASS_TRAVEL·thickness` closer (each of its particles' speeds relative to the surface's
+    /// mean velocity summed over the steps is held to half that), so every pass sees the
+    /// pairs in its proximity band come at most [`PASS_TRAVEL`] thicknesses closer whatever
+    /// the step; and a pass is due when a surface vertex has left the box it was given at
+    /// the last search (relative to the surface's mean position), since pairs which are not
+    /// candidates may then come near. Parts of the surface far from each other need no pass
+    /// however fast they move.
+    pub fn advance(&mut self, h: Scalar, x: &[Vector], v: &[Vector]) -> bool {
+        if self.start.len() != v.len() || x.len() != v.len() || self.surface.triangles.is_empty() {
             return false;
         }
         // Two parts approach at most at |v_a − c| + |v_b − c| for any common velocity c: the
         // mean one makes a body that falls or slides as a whole count as still.
         let verts = &self.surface.vertices;
-        let mean =
-            verts.iter().map(|&i| v[i as usize]).sum::<Vector>() / verts.len().max(1) as Scalar;
-        let vmax2 = verts
-            .iter()
-            .map(|&i| (v[i as usize] - mean).length_squared())
-            .fold(0.0, Scalar::max);
+        let (mut sum_v, mut sum_x) = (Vector::ZERO, Vector::ZERO);
+        for &i in verts {
+            sum_v += v[i as usize];
+            sum_x += x[i as usize];
+        }
+        let n = verts.len().max(1) as Scalar;
+        let (mean_v, mean_x) = (sum_v / n, sum_x / n);
         self.since += h;
-        self.travel += 2.0 * vmax2.sqrt() * h;
-        self.travel as f64 > PASS_TRAVEL * self.params.thickness
+        let s = &mut self.s;
+        let tau = s.clock + self.since as f64;
+        if s.budget.len() != v.len() || s.tube_s.len() != x.len() || tau > s.tube_len {
+            return true;
+        }
+        let mut due = false;
+        for &i in verts {
+            let i = i as usize;
+            let t = s.travel[i] + (v[i] - mean_v).length() * h;
+            s.travel[i] = t;
+            due |= t > s.budget[i];
+        }
+        // Each vertex within its tube as the pass's check reads it, but in `Scalar`: a vertex
+        // that round-off keeps inside a little longer only makes the pass later, and the pass
+        // checks exactly.
+        let (d, tau) = (mean_x - s.tube_ref_s, tau as Scalar);
+        let g = Vector::splat((BROAD_GROW * self.params.thickness) as Scalar);
+        due || !verts.iter().all(|&i| {
+            let (base, w) = s.tube_s[i as usize];
+            (x[i as usize] - d - (base + w * tau)).abs().cmple(g).all()
+        })
     }
 
     /// True when steps were taken since the last pass (the frame's end then needs one, so
@@ -508,7 +558,6 @@ impl SelfContact {
         self.start = start;
         self.start.copy_from_slice(x);
         self.since = 0.0;
-        self.travel = 0.0;
         self.support.clear();
     }
 
@@ -538,6 +587,7 @@ impl SelfContact {
         s.u.resize(n, DVec3::ZERO);
         s.vel.resize(n, DVec3::ZERO);
         s.w.resize(n, 0.0);
+        s.clock += h;
         // New paths: the culled patches' flatness is unknown.
         s.cones_at = u64::MAX;
         s.broad_at = u64::MAX;
@@ -641,6 +691,34 @@ impl SelfContact {
             x[i] = from_d(s.p0[i] + s.u[i] * h);
             v[i] = from_d(s.vel[i]);
         }
+        // How far each particle may travel before the next pass is due (see
+        // [`SelfContact::advance`]): half of what its nearest candidate pair may close, that
+        // pair's distance at the pass's end bounded below by its distance at the start less
+        // the longest path of each of its parts over the pass (the paths' lengths held in
+        // `travel` meanwhile).
+        s.travel.clear();
+        s.travel.resize(n, 0.0);
+        for &i in &self.surface.vertices {
+            let i = i as usize;
+            s.travel[i] = (s.u[i].length() * h) as Scalar;
+        }
+        s.budget.clear();
+        s.budget.resize(n, Scalar::INFINITY);
+        let (near, band) = (PROXIMITY * ctx.thick, PASS_TRAVEL * ctx.thick);
+        for &(pair, d0) in &s.pairs {
+            let ids = ctx.stencil_ids(pair);
+            let [a, b, c, d] = ids.map(|i| s.travel[i as usize]);
+            let closing = match pair {
+                Pair::PointTriangle(..) => a + b.max(c).max(d),
+                Pair::EdgeEdge(..) => a.max(b) + c.max(d),
+            } as f64;
+            let half = (0.5 * ((d0 - closing - near).max(0.0) + band)) as Scalar;
+            for i in ids {
+                let m = &mut s.budget[i as usize];
+                *m = m.min(half);
+            }
+        }
+        s.travel.fill(0.0);
         rep.searches = s.searches - searches;
         rep.tested = s.tested - tested;
         rep.resumed = s.resumed - resumed;
@@ -683,9 +761,10 @@ fn touch_tolerance(thick: f64) -> f64 {
 
 impl Ctx<'_> {
     /// Finds the candidate pairs again unless every surface vertex's path over this pass
-    /// (start and end) still lies in the box it was given when they were last found (its path
-    /// then, grown by the thickness): kept across passes and steps (a Verlet list), so a body
-    /// at rest or moving slowly searches rarely.
+    /// (start and end) still lies within [`BROAD_GROW`] thicknesses of the motion it had when
+    /// they were last found, within that search's horizon ([`AHEAD`]): kept across passes
+    /// and steps (a Verlet list along the motion), so a body at rest, or swinging or sliding
+    /// smoothly, searches rarely.
     fn ensure_broad(&self, s: &mut Scratch) -> bool {
         // Nothing changed since the last check.
         if s.broad_valid && s.broad_at == s.edits {
@@ -704,15 +783,21 @@ impl Ctx<'_> {
             sum1 += p1;
         }
         let (mean0, mean1) = (sum0 / nv, sum1 / nv);
-        if s.broad_valid && s.vcore.len() == s.p0.len() {
-            // The boxes are kept relative to the surface's mean position: a common translation
-            // changes no distance.
-            let (d0, d1) = (mean0 - s.broad_ref, mean1 - s.broad_ref);
+        let grow = BROAD_GROW * self.thick;
+        if s.broad_valid && s.tube.len() == s.p0.len() && s.clock <= s.tube_len {
+            // Each vertex must still be within `grow` (in each coordinate) of where its motion
+            // at the search takes it, relative to the surface's mean position (a common
+            // translation changes no distance), at the start and the end of the pass (and so
+            // all along it: both straight).
+            let (t0, t1) = (s.clock - h, s.clock);
+            let (d0, d1) = (mean0 - s.tube_ref, mean1 - s.tube_ref);
+            let g = DVec3::splat(grow);
             let inside = verts.iter().all(|&i| {
                 let i = i as usize;
-                let (lo, hi) = s.vcore[i];
-                let (a, b) = (s.p0[i] - d0, s.p1[i] - d1);
-                lo.cmple(a.min(b)).all() && a.max(b).cmple(hi).all()
+                let (base, w) = s.tube[i];
+                let e0 = s.p0[i] - d0 - (base + w * t0);
+                let e1 = s.p1[i] - d1 - (base + w * t1);
+                e0.abs().max(e1.abs()).cmple(g).all()
             });
             // The culled patches must still be flat along the paths as they are now.
             if inside && s.cones_at != s.edits {
@@ -738,17 +823,35 @@ impl Ctx<'_> {
                 return false;
             }
         }
-        let grow = BROAD_GROW * self.thick;
-        self.broad_phase(s, grow);
-        s.broad_ref = mean0;
+        self.broad_phase(s, grow, mean1);
+        s.clock = 0.0;
+        s.tube_s.clear();
+        s.tube_s
+            .extend(s.tube.iter().map(|&(b, w)| (from_d(b), from_d(w))));
+        s.tube_ref_s = from_d(mean1);
         self.start_distances(s, 0);
-        // Keep only pairs that can come within the thickness before the next search: each
-        // part stays in its box, so within its path now plus the box's growth (its diagonal).
+        // Keep only pairs that can come within the thickness before the next search. At the
+        // pass's end a pair is at least its distance now less the pass's approach; after, each
+        // vertex is within `grow` of its motion at the search in each coordinate (√3 `grow`),
+        // and those motions bring the pair's parts closer by at most the largest difference
+        // of their vertices' velocities (relative to the mean) times the search's horizon.
         let slack = 2.0 * 3f64.sqrt() * grow;
         let mut pairs = std::mem::take(&mut s.pairs);
         pairs.retain(|&(pair, d0)| {
             let ids = self.stencil_ids(pair);
-            d0 - self.reach(s, pair, ids) - slack < PROXIMITY * self.thick
+            let w = ids.map(|i| s.tube[i as usize].1);
+            let apart = |a: &[DVec3], b: &[DVec3]| {
+                a.iter()
+                    .flat_map(|p| b.iter().map(move |q| p.distance_squared(*q)))
+                    .fold(0.0, f64::max)
+            };
+            let drift = match pair {
+                Pair::PointTriangle(..) => apart(&w[..1], &w[1..]),
+                Pair::EdgeEdge(..) => apart(&w[..2], &w[2..]),
+            }
+            .sqrt()
+                * s.tube_len;
+            d0 - self.reach(s, pair, ids) - drift - slack < PROXIMITY * self.thick
         });
         s.pairs = pairs;
         s.broad_valid = true;
@@ -760,27 +863,38 @@ impl Ctx<'_> {
     /// Candidate pairs: swept boxes (start to end, grown by the thickness and `grow`) that
     /// overlap; adjacent pairs (sharing a particle) excluded, and pairs within flat connected
     /// patches culled (see `tree`).
-    fn broad_phase(&self, s: &mut Scratch, grow: f64) {
-        // Each vertex's path grown by `grow` (where it may go before the next search), and
-        // that grown by half the thickness: two sets within the thickness of each other while
-        // they stay in their first boxes have overlapping second boxes.
+    fn broad_phase(&self, s: &mut Scratch, grow: f64, mean1: DVec3) {
+        // Each vertex's path, and its motion on from the path's end at its velocity relative
+        // to the surface's mean (a part that swings or slides keeps to it for several
+        // passes) over the search's horizon ([`AHEAD`]), all grown by `grow` (how far it may
+        // stray before the next search) and half the reach (the tree's boxes): two sets
+        // within the reach of each other while they stay within `grow` have overlapping boxes.
         let reach = PROXIMITY * self.thick;
-        let (gd, td) = (DVec3::splat(grow), DVec3::splat(0.5 * reach));
-        s.vbox.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
-        s.vcore.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
-        for &i in &self.surf.vertices {
+        let verts = &self.surf.vertices;
+        let nv = verts.len().max(1) as f64;
+        let mean_u = verts.iter().map(|&i| s.u[i as usize]).sum::<DVec3>() / nv;
+        let fastest = verts
+            .iter()
+            .map(|&i| (s.u[i as usize] - mean_u).length_squared())
+            .fold(0.0, f64::max)
+            .sqrt();
+        s.tube_len = (AHEAD_PASSES * self.h).min(AHEAD * self.thick / fastest);
+        s.tube_ref = mean1;
+        s.tube.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
+        s.p2.resize(s.p0.len(), DVec3::ZERO);
+        for &i in verts {
             let i = i as usize;
-            let (a, b) = (s.p0[i], s.p1[i]);
-            let core = (a.min(b) - gd, a.max(b) + gd);
-            s.vcore[i] = core;
-            s.vbox[i] = (core.0 - td, core.1 + td);
+            let w = s.u[i] - mean_u;
+            s.tube[i] = (s.p1[i], w);
+            s.p2[i] = s.p1[i] + w * s.tube_len;
         }
         let tris = &self.surf.triangles;
         if !s.tree.built_for(tris.len()) {
             s.tree.build(self.surf, &s.p0);
         }
-        s.tree.load(&self.surf.vertices, &s.p0, &s.p1);
-        s.tree.refit(tris, 0.5 * reach + grow);
+        s.tree.load(verts, &s.p0, &s.p1);
+        s.tree.stretch(verts, &s.p2);
+        s.tree.refit(tris, &self.surf.edges, 0.5 * reach + grow);
         s.pairs.clear();
         self.walk(s, false);
         s.cones_at = s.edits;
@@ -794,7 +908,6 @@ impl Ctx<'_> {
         s.tree.search(
             &self.surf.triangles,
             &self.surf.edges,
-            &s.vbox,
             resume,
             |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
             |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),

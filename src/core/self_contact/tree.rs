@@ -207,9 +207,15 @@ fn dots13(b: Lanes3) -> [Lanes; 13] {
 /// [`triangle_bits`] for four triangles at once, from their edges `e` (`[e₀, f₀, e₁, f₁]`:
 /// the edges from the first vertex at the start and the end, component-wise in lanes) and
 /// spans. Computes the same thing with the same operations in the same order, so the same
-/// bits (checked in the tests).
+/// bits (checked in the tests). Also gives the (unnormalized) normals at the start and the
+/// end, `e₀ × f₀` and `e₁ × f₁`, for the crease rule.
 #[inline(always)]
-fn triangle_bits4(e: [Lanes3; 4], span_lo: Lanes3, span_hi: Lanes3, qmax: f32) -> [u32; 4] {
+fn triangle_bits4(
+    e: [Lanes3; 4],
+    span_lo: Lanes3,
+    span_hi: Lanes3,
+    qmax: f32,
+) -> ([u32; 4], [Lanes3; 2]) {
     let [e0, f0, e1, f1] = e;
     let n0 = cross3(e0, f0);
     let n1 = cross3(e1, f1);
@@ -251,7 +257,7 @@ fn triangle_bits4(e: [Lanes3; 4], span_lo: Lanes3, span_hi: Lanes3, qmax: f32) -
     }
     let (pos, neg) = ((pos * within).to_array(), (neg * within).to_array());
     let bits = |l: usize| pos[l] as u32 | (neg[l] as u32) << 13;
-    [bits(0), bits(1), bits(2), bits(3)]
+    ([bits(0), bits(1), bits(2), bits(3)], [n0, n1])
 }
 
 /// The spans of each batch of four triangles, lane per triangle (low x, y, z, high x, y, z).
@@ -270,7 +276,9 @@ fn span_lanes(span: &[Span]) -> impl Iterator<Item = [Vec4; 6]> + '_ {
 }
 
 /// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, four at a
-/// time.
+/// time, and its normals at the start and the end (`normals[t]`, as
+/// [`SurfaceTree::normals_of`] computes them).
+#[allow(clippy::too_many_arguments)]
 fn all_bits(
     triangles: &[[u32; 3]],
     q0: &[Vec3A],
@@ -279,6 +287,7 @@ fn all_bits(
     span: &[Span],
     span4: &[[Vec4; 6]],
     out: &mut [u32],
+    normals: &mut [[Vec3A; 2]],
 ) {
     let batches = triangles.len() / 4;
     for c in 0..batches {
@@ -305,22 +314,27 @@ fn all_bits(
             lanes(&cols[3]),
         ];
         let [lo_x, lo_y, lo_z, hi_x, hi_y, hi_z] = span4[c];
-        out[4 * c..4 * c + 4].copy_from_slice(&triangle_bits4(
-            e,
-            [lo_x, lo_y, lo_z],
-            [hi_x, hi_y, hi_z],
-            qmax,
-        ));
+        let (bits, [n0, n1]) = triangle_bits4(e, [lo_x, lo_y, lo_z], [hi_x, hi_y, hi_z], qmax);
+        out[4 * c..4 * c + 4].copy_from_slice(&bits);
+        // The normals back from lanes to one vector per triangle.
+        let per_lane = |n: Lanes3| Mat4::from_cols(n[0], n[1], n[2], Vec4::ZERO).transpose();
+        let (m0, m1) = (per_lane(n0), per_lane(n1));
+        for l in 0..4 {
+            normals[4 * c + l] = [Vec3A::from_vec4(m0.col(l)), Vec3A::from_vec4(m1.col(l))];
+        }
     }
     for t in 4 * batches..triangles.len() {
         let [a, b, c] = triangles[t].map(|i| i as usize);
         out[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
+        let n = |q: &[Vec3A]| (q[b] - q[a]).cross(q[c] - q[a]);
+        normals[t] = [n(q0), n(q1)];
     }
 }
 
 /// A box in `f32`.
 type Box32 = (Vec3A, Vec3A);
 
+#[cfg(test)]
 fn overlap(a: &Aabb, b: &Aabb) -> bool {
     a.0.cmple(b.1).all() && b.0.cmple(a.1).all()
 }
@@ -379,6 +393,10 @@ pub(super) struct SurfaceTree {
     /// bits of the last refit.
     tbox: Vec<Box32>,
     tbits: Vec<u32>,
+    /// Per vertex and per edge: the swept box of the last refit, as the triangles' (a
+    /// triangle's box is the union of its vertices').
+    vbox: Vec<Box32>,
+    ebox: Vec<Box32>,
     /// Per node: box and cone bits of the last refit.
     nbox: Vec<Box32>,
     nbits: Vec<u32>,
@@ -386,6 +404,9 @@ pub(super) struct SurfaceTree {
     /// ([`SurfaceTree::load`]), and the largest component among them.
     q0: Vec<Vec3A>,
     q1: Vec<Vec3A>,
+    /// Where each vertex may be headed after the pass ([`SurfaceTree::stretch`]; empty: the
+    /// ends of the paths).
+    q2: Vec<Vec3A>,
     qmax: f32,
     origin: DVec3,
     /// Nodes the last search did not test against themselves as flat: their triangles'
@@ -709,6 +730,8 @@ impl SurfaceTree {
 
         self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
         self.tbits.resize(nt, 0);
+        self.vbox.resize(x.len(), (Vec3A::ZERO, Vec3A::ZERO));
+        self.ebox.resize(edges.len(), (Vec3A::ZERO, Vec3A::ZERO));
         self.nbox
             .resize(self.nodes.len(), (Vec3A::ZERO, Vec3A::ZERO));
         self.nbits.resize(self.nodes.len(), 0);
@@ -739,6 +762,22 @@ impl SurfaceTree {
         }
         self.qmax = qmax.max_element();
         self.origin = origin;
+        self.q2.clear();
+    }
+
+    /// Stretches the vertices' boxes of the next refit to also hold `p2` (where each may be
+    /// headed), leaving the paths (and so the cone bits) as loaded.
+    pub fn stretch(&mut self, verts: &[u32], p2: &[DVec3]) {
+        self.q2.clear();
+        self.q2.extend_from_slice(&self.q1);
+        let mut qmax = self.qmax;
+        for &i in verts {
+            let i = i as usize;
+            let c = (p2[i] - self.origin).as_vec3a();
+            self.q2[i] = c;
+            qmax = qmax.max(c.abs().max_element());
+        }
+        self.qmax = qmax;
     }
 
     /// Takes new ends `p1` of the paths of `moved` vertices (the starts and the others as
@@ -754,20 +793,29 @@ impl SurfaceTree {
         self.qmax = qmax;
     }
 
-    /// Refits the boxes (the triangles' paths over the pass, as [`SurfaceTree::load`]ed,
-    /// grown by `margin`) and the cone bits.
-    pub fn refit(&mut self, triangles: &[[u32; 3]], margin: f64) {
+    /// Refits the boxes (the paths over the pass of the vertices, edges and triangles, as
+    /// [`SurfaceTree::load`]ed, grown by `margin`) and the cone bits.
+    pub fn refit(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]], margin: f64) {
         // The margin plus the rounding of the positions to `f32` (half an ulp of the largest,
         // twice over) and of the margin itself.
         let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + self.qmax * f32::EPSILON);
         let (q0, q1, qmax) = (&self.q0, &self.q1, self.qmax);
-        for (t, tri) in triangles.iter().enumerate() {
-            let [a, b, c] = tri.map(|i| i as usize);
-            let (s, e) = ([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]]);
-            let lo = s[0].min(s[1]).min(s[2]).min(e[0].min(e[1]).min(e[2]));
-            let hi = s[0].max(s[1]).max(s[2]).max(e[0].max(e[1]).max(e[2]));
-            self.tbox[t] = (lo - m, hi + m);
+        self.vbox.resize(q0.len(), (Vec3A::ZERO, Vec3A::ZERO));
+        for ((b, &s), &e) in self.vbox.iter_mut().zip(q0).zip(q1) {
+            *b = (s.min(e) - m, s.max(e) + m);
         }
+        for (b, &c) in self.vbox.iter_mut().zip(&self.q2) {
+            *b = (b.0.min(c - m), b.1.max(c + m));
+        }
+        let vb = &self.vbox;
+        for (t, tri) in triangles.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| vb[i as usize]);
+            self.tbox[t] = union32(union32(a, b), c);
+        }
+        for (b, e) in self.ebox.iter_mut().zip(edges) {
+            *b = union32(vb[e[0] as usize], vb[e[1] as usize]);
+        }
+        self.tnormal.resize(triangles.len(), [Vec3A::ZERO; 2]);
         all_bits(
             triangles,
             q0,
@@ -776,8 +824,9 @@ impl SurfaceTree {
             &self.span,
             &self.span4,
             &mut self.tbits,
+            &mut self.tnormal,
         );
-        self.all_creases(triangles);
+        self.all_creases();
         self.refit_nodes(true);
     }
 
@@ -788,16 +837,17 @@ impl SurfaceTree {
         if self.culled.is_empty() {
             return true;
         }
+        self.tnormal.resize(triangles.len(), [Vec3A::ZERO; 2]);
         let (q0, q1, qmax, tbits) = (&self.q0, &self.q1, self.qmax, &mut self.tbits);
-        let (span, span4) = (&self.span, &self.span4);
+        let (span, span4, tnormal) = (&self.span, &self.span4, &mut self.tnormal);
         let mut bits_of = |t: usize| {
             let [a, b, c] = triangles[t].map(|i| i as usize);
             tbits[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
         };
         match moved {
             None => {
-                all_bits(triangles, q0, q1, qmax, span, span4, tbits);
-                self.all_creases(triangles);
+                all_bits(triangles, q0, q1, qmax, span, span4, tbits, tnormal);
+                self.all_creases();
             }
             Some(moved) => {
                 for &v in moved {
@@ -873,12 +923,8 @@ impl SurfaceTree {
         self.tnormal[t] = [n(&self.q0), n(&self.q1)];
     }
 
-    /// The crease rule over every hinge.
-    fn all_creases(&mut self, triangles: &[[u32; 3]]) {
-        self.tnormal.resize(triangles.len(), [Vec3A::ZERO; 2]);
-        for t in 0..triangles.len() {
-            self.normals_of(triangles, t);
-        }
+    /// The crease rule over every hinge (the normals as [`all_bits`] left them).
+    fn all_creases(&mut self) {
         for h in 0..self.hinges.len() {
             self.crease(h);
         }
@@ -914,7 +960,8 @@ impl SurfaceTree {
 
     /// Walks the tree against itself (after [`SurfaceTree::refit`]) and calls `pt(p, t)` for
     /// every point–triangle pair and `ee(e, f)` for every edge–edge pair (edge indices) whose
-    /// boxes overlap, neither sharing a particle, each once; flat connected nodes are culled.
+    /// boxes (the refit's) overlap, neither sharing a particle, each once; flat connected
+    /// nodes are culled.
     ///
     /// With `resume`, only the nodes that [`SurfaceTree::still_flat`] found no longer
     /// flat are walked (the boxes of the last refit still holding the paths, and the bits
@@ -923,7 +970,6 @@ impl SurfaceTree {
         &mut self,
         triangles: &[[u32; 3]],
         edges: &[[u32; 2]],
-        vbox: &[Aabb],
         resume: bool,
         mut pt: impl FnMut(u32, u32),
         mut ee: impl FnMut(u32, u32),
@@ -943,19 +989,15 @@ impl SurfaceTree {
             self.failed.clear();
             stack.push((0, 0, false));
         }
-        let tri_box = |t: [u32; 3]| {
-            let b = t.map(|i| vbox[i as usize]);
-            union(union(b[0], b[1]), b[2])
-        };
         let mut pair = |me: &Self, t: u32, u: u32| {
-            if !overlap32(&me.tbox[t as usize], &me.tbox[u as usize]) {
+            let (tb, ub) = (&me.tbox[t as usize], &me.tbox[u as usize]);
+            if !overlap32(tb, ub) {
                 return;
             }
             let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
-            let (tb, ub) = (&tri_box(tt), &tri_box(tu));
             for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
                 for &p in &me.owned_vertices[own as usize] {
-                    if p != NONE && !other_tri.contains(&p) && overlap(&vbox[p as usize], ob) {
+                    if p != NONE && !other_tri.contains(&p) && overlap32(&me.vbox[p as usize], ob) {
                         pt(p, other);
                     }
                 }
@@ -964,18 +1006,16 @@ impl SurfaceTree {
                 if e == NONE {
                     continue;
                 }
-                let ea = edges[e as usize];
-                let eb = union(vbox[ea[0] as usize], vbox[ea[1] as usize]);
+                let (ea, eb) = (edges[e as usize], &me.ebox[e as usize]);
                 for &f in &me.owned_edges[u as usize] {
                     if f == NONE {
                         continue;
                     }
                     let fa = edges[f as usize];
-                    if fa.contains(&ea[0]) || fa.contains(&ea[1]) {
-                        continue;
-                    }
-                    let fb = union(vbox[fa[0] as usize], vbox[fa[1] as usize]);
-                    if overlap(&eb, &fb) {
+                    if !fa.contains(&ea[0])
+                        && !fa.contains(&ea[1])
+                        && overlap32(eb, &me.ebox[f as usize])
+                    {
                         ee(e, f);
                     }
                 }
@@ -1284,14 +1324,12 @@ mod tests {
         let mut tree = SurfaceTree::default();
         tree.build(&surf, x);
         tree.load(&surf.vertices, x, x);
-        tree.refit(tris, m);
-        let vbox: Vec<Aabb> = x.iter().map(|&p| (p - m, p + m)).collect();
+        tree.refit(tris, &surf.edges, m);
         let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
         let (mut npt, mut nee) = (0, 0);
         tree.search(
             tris,
             &surf.edges,
-            &vbox,
             false,
             |p, t| {
                 npt += 1;
@@ -1501,13 +1539,16 @@ mod tests {
             })
             .collect();
         let mut out = vec![0; n];
+        let mut normals = vec![[Vec3A::ZERO; 2]; n];
         let span4: Vec<[Vec4; 6]> = span_lanes(&span).collect();
-        all_bits(&tris, &q0, &q1, 1.0, &span, &span4, &mut out);
+        all_bits(&tris, &q0, &q1, 1.0, &span, &span4, &mut out, &mut normals);
         let mut set = 0;
         for (t, tri) in tris.iter().enumerate() {
             let [a, b, c] = tri.map(|i| i as usize);
             let want = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], 1.0, span[t]);
             assert_eq!(out[t], want, "triangle {t}");
+            let n = |q: &[Vec3A]| (q[b] - q[a]).cross(q[c] - q[a]);
+            assert_eq!(normals[t], [n(&q0), n(&q1)], "triangle {t}'s normals");
             set += (want != 0) as u32;
         }
         assert!(set > 40 && set < n as u32 - 40, "{set}");
