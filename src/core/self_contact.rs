@@ -491,10 +491,10 @@ impl SelfContact {
     /// PASS_TRAVEL·thickness` closer (each of its particles' speeds relative to the surface's
     /// mean velocity summed over the steps is held to half that), so every pass sees the
     /// pairs in its proximity band come at most [`PASS_TRAVEL`] thicknesses closer whatever
-    /// the step; and a pass is due when a surface vertex has left the box it was given at
-    /// the last search (relative to the surface's mean position), since pairs which are not
-    /// candidates may then come near. Parts of the surface far from each other need no pass
-    /// however fast they move.
+    /// the step; and a pass is due when a surface vertex has strayed from the motion it had
+    /// at the last search, or that search's horizon has passed (see [`AHEAD`]), since pairs
+    /// which are not candidates may then come near. Parts of the surface far from each other
+    /// need no pass however fast they move.
     pub fn advance(&mut self, h: Scalar, x: &[Vector], v: &[Vector]) -> bool {
         if self.start.len() != v.len() || x.len() != v.len() || self.surface.triangles.is_empty() {
             return false;
