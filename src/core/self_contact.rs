@@ -913,6 +913,10 @@ impl Ctx<'_> {
             |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
         );
         s.pairs = pairs.into_inner();
+        // Headroom of half what a walk found: the count wanders as a resting body settles,
+        // and a pass should not allocate each time it passes the last largest.
+        let want = s.pairs.len() + s.pairs.len() / 2;
+        s.pairs.reserve(want.saturating_sub(s.pairs.len()));
         s.tested += s.tree.triangle_pairs;
     }
 
