@@ -33,7 +33,7 @@ fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
     (model, state)
 }
 
-/// Times `iters` runs of `work` on a pool of `THREADS` threads (default: all cores).
+/// Times `iters` runs of `work` on a team of `THREADS` threads (default: all cores).
 fn timed(iters: u64, mut work: impl FnMut() + Send) -> Duration {
     let threads = std::env::var("THREADS")
         .ok()

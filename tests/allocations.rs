@@ -5,7 +5,7 @@
 //!
 //! Without the test harness (`harness = false`): the harness's own thread allocates when it
 //! first waits for a test's result, and under load that can fall inside a counted window.
-//! Here the only threads are this one and the kernels' pool.
+//! Here the only threads are this one and the kernels' team.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]

@@ -494,7 +494,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
         scratch: &mut ParticleState,
     ) -> bool {
         let f = &mut scratch.v;
-        f.fill(Vector::ZERO);
+        crate::core::kernels::sweep::clear(f);
         self.accumulate_forces(t, state, f);
         for p in self
             .pinned
@@ -504,21 +504,15 @@ impl OdeSystem<ParticleState> for ParticleModel {
         {
             scratch.x[p as usize] = state.x[p as usize];
         }
-        let g = self.gravity;
-        for (((x, v), f), &w) in state
-            .x
-            .iter_mut()
-            .zip(state.v.iter_mut())
-            .zip(scratch.v.iter())
-            .zip(&self.inv_mass)
-        {
-            // Pinned and prescribed particles have w = 0 and get no gravity.
-            let a = if w > 0.0 { *f * w + g } else { Vector::ZERO };
-            let dv = a * h;
-            let v0 = *v;
-            *v += dv;
-            *x += (v0 + dv) * h;
-        }
+        // Pinned and prescribed particles have w = 0 and get no gravity.
+        crate::core::kernels::sweep::sweep(
+            &mut state.x,
+            &mut state.v,
+            &scratch.v,
+            &self.inv_mass,
+            self.gravity,
+            h,
+        );
         for &(p, _) in &self.pinned {
             // The derivative of a pin is zero: x and v stay (v got + 0 above).
             let p = p as usize;

@@ -15,9 +15,13 @@
 //! processor has it; then every particle sums its slots in a fixed order. [`springs`] keeps
 //! springs in rows by their lower particle index, so a particle's own row is contiguous;
 //! [`tets`] evaluates neo-Hookean elements in the build's precision with their rest shapes
-//! precomputed.
+//! precomputed. [`sweep`] is symplectic Euler's update of every particle, in whole registers
+//! in the f64 build.
 
 pub mod springs;
+pub mod sweep;
+#[cfg(feature = "parallel")]
+pub mod team;
 pub mod tets;
 
 /// AVX helpers shared by the f32 kernels.
@@ -66,20 +70,34 @@ pub(crate) mod avx {
     }
 }
 
-/// Runs `job(c)` for every chunk `c` in `0..chunks`: on the rayon pool the caller runs on
-/// (see [`with_threads`]) when the `parallel` feature is on, the caller is one of that pool's
-/// threads and there is more than one chunk; one after another otherwise. Jobs must write
-/// disjoint memory.
-///
-/// Only from inside a pool: a parallel call from any other thread goes through rayon's global
-/// injector queue, which allocates a block every few dozen calls — and a step allocates
-/// nothing. The bits are the same either way.
+/// AVX helpers shared by the f64 kernels.
+#[cfg(all(target_arch = "x86_64", feature = "f64"))]
+pub(crate) mod avx {
+    use std::arch::x86_64::*;
+
+    /// The 4×4 transpose of four 4-lane rows of `f64`: the columns, or from columns the rows.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn transpose_pd(a: __m256d, b: __m256d, c: __m256d, d: __m256d) -> [__m256d; 4] {
+        let (t0, t1) = (_mm256_unpacklo_pd(a, b), _mm256_unpackhi_pd(a, b));
+        let (t2, t3) = (_mm256_unpacklo_pd(c, d), _mm256_unpackhi_pd(c, d));
+        [
+            _mm256_permute2f128_pd::<0x20>(t0, t2),
+            _mm256_permute2f128_pd::<0x20>(t1, t3),
+            _mm256_permute2f128_pd::<0x31>(t0, t2),
+            _mm256_permute2f128_pd::<0x31>(t1, t3),
+        ]
+    }
+}
+
+/// Runs `job(c)` for every chunk `c` in `0..chunks`: shared with the helpers of the
+/// [`team::Team`] the caller runs in (see [`with_threads`]) when the `parallel` feature is on
+/// and there is more than one chunk; one after another otherwise. Jobs must write disjoint
+/// memory. The bits are the same either way.
 #[inline]
 pub(crate) fn for_each_chunk(chunks: usize, job: impl Fn(usize) + Sync + Send) {
     #[cfg(feature = "parallel")]
-    if chunks > 1 && rayon::current_thread_index().is_some() && rayon::current_num_threads() > 1 {
-        use rayon::prelude::*;
-        (0..chunks).into_par_iter().for_each(job);
+    if chunks > 1 && team::share(chunks, &job) {
         return;
     }
     for c in 0..chunks {
@@ -87,18 +105,14 @@ pub(crate) fn for_each_chunk(chunks: usize, job: impl Fn(usize) + Sync + Send) {
     }
 }
 
-/// Runs `f` on a pool of `threads` threads (`0`: all cores), so that the force kernels of a
-/// large body called within it share the work; outside such a pool (or a rayon pool of the
-/// caller's own, entered with `install`) they run on the calling thread. Without the
-/// `parallel` feature `f` simply runs, on one thread. Results are the same bits for any thread
-/// count.
-pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R {
+/// Runs `f` with a team of `threads` threads (`0`: one per core) sharing the force kernels of
+/// large bodies it steps: on this thread, with `threads − 1` helpers spawned for the call
+/// (keep a [`team::Team`] to reuse them). Without the `parallel` feature `f` simply runs, on
+/// one thread. Results are the same bits for any thread count.
+pub fn with_threads<R>(threads: usize, f: impl FnOnce() -> R) -> R {
     #[cfg(feature = "parallel")]
     {
-        match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
-            Ok(pool) => pool.install(f),
-            Err(_) => f(),
-        }
+        team::Team::new(threads).run(f)
     }
     #[cfg(not(feature = "parallel"))]
     {
@@ -107,16 +121,12 @@ pub fn with_threads<R: Send>(threads: usize, f: impl FnOnce() -> R + Send) -> R 
     }
 }
 
-/// Number of threads the kernels use when called from here (1 outside a pool, and without
+/// Number of threads the kernels use when called from here (1 outside a team, and without
 /// the `parallel` feature).
 pub fn current_threads() -> usize {
     #[cfg(feature = "parallel")]
     {
-        if rayon::current_thread_index().is_some() {
-            rayon::current_num_threads()
-        } else {
-            1
-        }
+        team::current_threads()
     }
     #[cfg(not(feature = "parallel"))]
     {

@@ -36,6 +36,49 @@ pub const CHUNK_SPRINGS: usize = 4096;
 /// Particles per chunk of the gather pass.
 pub const CHUNK_PARTICLES: usize = 1024;
 
+/// A spring's force in the buffer between the two passes: a `Vec3A` (one 16-byte lane group)
+/// in the f32 build; in the f64 build a `DVec3` padded to 32 bytes and aligned to them, so the
+/// force pass stores a whole AVX register per spring and the gather adds one per slot (a
+/// `DVec3`'s 24 bytes straddle registers).
+#[cfg(not(feature = "f64"))]
+type Slot = Vector;
+
+/// See the f32 build's `Slot`.
+#[cfg(feature = "f64")]
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(32))]
+struct Slot([f64; 4]);
+
+/// Storing and reading a force in a [`Slot`].
+trait SlotExt {
+    fn put(v: Vector) -> Self;
+    fn get(self) -> Vector;
+}
+
+#[cfg(not(feature = "f64"))]
+impl SlotExt for Slot {
+    #[inline(always)]
+    fn put(v: Vector) -> Self {
+        v
+    }
+    #[inline(always)]
+    fn get(self) -> Vector {
+        self
+    }
+}
+
+#[cfg(feature = "f64")]
+impl SlotExt for Slot {
+    #[inline(always)]
+    fn put(v: Vector) -> Self {
+        Slot([v.x, v.y, v.z, 0.0])
+    }
+    #[inline(always)]
+    fn get(self) -> Vector {
+        Vector::new(self.0[0], self.0[1], self.0[2])
+    }
+}
+
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 struct Col {
@@ -61,7 +104,7 @@ pub struct SpringRows {
     upper_start: Vec<u32>,
     upper: Vec<u32>,
     /// Each spring's force on its lower particle, from the force pass.
-    buffer: Mutex<Vec<Vector>>,
+    buffer: Mutex<Vec<Slot>>,
 }
 
 impl SpringRows {
@@ -124,7 +167,7 @@ impl SpringRows {
             row_start,
             upper_start,
             upper,
-            buffer: Mutex::new(vec![Vector::ZERO; total]),
+            buffer: Mutex::new(vec![Slot::default(); total]),
         }
     }
 
@@ -141,8 +184,11 @@ impl SpringRows {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         let buf = SharedMut(guard.as_mut_ptr());
         let m = self.j.len();
-        #[cfg(target_arch = "x86_64")]
+        // The f64 kernels broadcast lanes across the register's halves (AVX2).
+        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
         let avx = std::arch::is_x86_feature_detected!("avx");
+        #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+        let avx = std::arch::is_x86_feature_detected!("avx2");
         for_each_chunk(self.chunks(), |c| {
             let (s0, s1) = (c * CHUNK_SPRINGS, ((c + 1) * CHUNK_SPRINGS).min(m));
             // SAFETY: indices are below the bound the caller guarantees; chunk `c` writes only
@@ -161,29 +207,47 @@ impl SpringRows {
         let n = self.row_start.len() - 1;
         let fp = SharedMut(f.as_mut_ptr());
         for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-            for p in c * CHUNK_PARTICLES..((c + 1) * CHUNK_PARTICLES).min(n) {
-                // SAFETY: `p` is below the bound; each chunk writes its own particles only;
-                // the layout's slots are below the number of springs.
-                unsafe {
-                    let row = *self.row_start.get_unchecked(p) as usize
-                        ..*self.row_start.get_unchecked(p + 1) as usize;
-                    let up = *self.upper_start.get_unchecked(p) as usize
-                        ..*self.upper_start.get_unchecked(p + 1) as usize;
-                    if row.is_empty() && up.is_empty() {
-                        continue;
-                    }
-                    let mut plus = Vector::ZERO;
-                    for f in buf.get_unchecked(row) {
-                        plus += *f;
-                    }
-                    let mut minus = Vector::ZERO;
-                    for &s in self.upper.get_unchecked(up) {
-                        minus += *buf.get_unchecked(s as usize);
-                    }
-                    *fp.ptr().add(p) += plus - minus;
+            let (p0, p1) = (c * CHUNK_PARTICLES, ((c + 1) * CHUNK_PARTICLES).min(n));
+            // SAFETY: particles below the bound; each chunk writes its own particles only.
+            unsafe {
+                #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+                if avx {
+                    self.gather_avx(p0, p1, buf, fp.ptr());
+                    return;
                 }
+                self.gather(p0, p1, buf, fp.ptr());
             }
         });
+    }
+
+    /// Particles `p0..p1` add their rows' slots and subtract their upper slots.
+    ///
+    /// # Safety
+    /// `p1 ≤` the bound; `f` points to at least `p1` vectors.
+    #[inline(always)]
+    unsafe fn gather(&self, p0: usize, p1: usize, buf: &[Slot], f: *mut Vector) {
+        for p in p0..p1 {
+            // SAFETY: `p` is below the bound; the layout's slots are below the number of
+            // springs.
+            unsafe {
+                let row = *self.row_start.get_unchecked(p) as usize
+                    ..*self.row_start.get_unchecked(p + 1) as usize;
+                let up = *self.upper_start.get_unchecked(p) as usize
+                    ..*self.upper_start.get_unchecked(p + 1) as usize;
+                if row.is_empty() && up.is_empty() {
+                    continue;
+                }
+                let mut plus = Vector::ZERO;
+                for f in buf.get_unchecked(row) {
+                    plus += f.get();
+                }
+                let mut minus = Vector::ZERO;
+                for &s in self.upper.get_unchecked(up) {
+                    minus += buf.get_unchecked(s as usize).get();
+                }
+                *f.add(p) += plus - minus;
+            }
+        }
     }
 
     /// Springs `s..s1` one at a time: `c` as in the module docs, the force `d c` into `buf`.
@@ -198,7 +262,7 @@ impl SpringRows {
         s1: usize,
         x: &[Vector],
         v: Option<&[Vector]>,
-        buf: *mut Vector,
+        buf: *mut Slot,
     ) {
         for s in s..s1 {
             // SAFETY: as the caller guarantees.
@@ -219,7 +283,7 @@ impl SpringRows {
                     None if l > 0.0 => k * (rest / l - 1.0),
                     None => 0.0,
                 };
-                *buf.add(s) = d * coef;
+                *buf.add(s) = Slot::put(d * coef);
             }
         }
     }
@@ -236,7 +300,7 @@ impl SpringRows {
         s1: usize,
         x: &[Vector],
         v: Option<&[Vector]>,
-        buf: *mut Vector,
+        buf: *mut Slot,
     ) -> usize {
         use super::avx::columns;
         use std::arch::x86_64::*;
@@ -300,41 +364,45 @@ impl SpringRows {
     }
 }
 
+#[cfg(all(target_arch = "x86_64", feature = "f64"))]
 impl SpringRows {
     /// Four springs at a time in AVX, in f64: the factors as [`Self::forces`] computes them, lane
     /// by lane with the same operations (no fused multiply-add, so the same bits), and the
     /// forces `d c` into `buf`, from spring `s` on. Returns where it stopped, fewer than
     /// four springs before `s1`.
-    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-    #[target_feature(enable = "avx")]
+    ///
+    /// Each `DVec3` is loaded whole into a register (a masked load: its 24 bytes, never the
+    /// next particle's), the four differences transposed to columns, and the four forces
+    /// transposed back and stored as whole 32-byte slots.
+    #[target_feature(enable = "avx2")]
     unsafe fn forces_avx(
         &self,
         mut s: usize,
         s1: usize,
         x: &[Vector],
         v: Option<&[Vector]>,
-        buf: *mut Vector,
+        buf: *mut Slot,
     ) -> usize {
+        use super::avx::transpose_pd;
         use std::arch::x86_64::*;
-        // SAFETY: `s + 3 < s1 ≤` the number of springs; particle indices below the bound the caller
-        // guarantees.
+        // SAFETY: `s + 3 < s1 ≤` the number of springs; particle indices below the bound the
+        // caller guarantees; a masked load reads only the three lanes of its `DVec3`; slots are
+        // 32-byte aligned.
         unsafe {
             let zero = _mm256_setzero_pd();
             let one = _mm256_set1_pd(1.0);
-            let mut c = [0.0f64; 4];
+            let xyz = _mm256_set_epi64x(0, -1, -1, -1);
             while s + 4 <= s1 {
                 let (ii, jj) = (self.col_i.as_ptr().add(s), self.j.as_ptr().add(s));
-                let diff = |a: &[Vector], q: usize| -> Vector {
-                    *a.get_unchecked(*ii.add(q) as usize) - *a.get_unchecked(*jj.add(q) as usize)
+                let load = |a: &[Vector], p: u32| {
+                    _mm256_maskload_pd(a.as_ptr().add(p as usize) as *const f64, xyz)
                 };
-                let lanes = |a: [f64; 4]| _mm256_set_pd(a[3], a[2], a[1], a[0]);
+                let diff = |a: &[Vector], q: usize| {
+                    _mm256_sub_pd(load(a, *ii.add(q)), load(a, *jj.add(q)))
+                };
                 let col = |a: &[Scalar]| _mm256_loadu_pd(a.as_ptr().add(s));
-                let d: [Vector; 4] = std::array::from_fn(|q| diff(x, q));
-                let (dx, dy, dz) = (
-                    lanes(d.map(|d| d.x)),
-                    lanes(d.map(|d| d.y)),
-                    lanes(d.map(|d| d.z)),
-                );
+                let d = [diff(x, 0), diff(x, 1), diff(x, 2), diff(x, 3)];
+                let [dx, dy, dz, _] = transpose_pd(d[0], d[1], d[2], d[3]);
                 let (rest, k) = (col(&self.rest), col(&self.k));
                 let dd = _mm256_add_pd(
                     _mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)),
@@ -344,12 +412,8 @@ impl SpringRows {
                 let pos = _mm256_cmp_pd::<_CMP_GT_OQ>(l, zero);
                 let coef = match v {
                     Some(v) => {
-                        let w: [Vector; 4] = std::array::from_fn(|q| diff(v, q));
-                        let (wx, wy, wz) = (
-                            lanes(w.map(|w| w.x)),
-                            lanes(w.map(|w| w.y)),
-                            lanes(w.map(|w| w.z)),
-                        );
+                        let [wx, wy, wz, _] =
+                            transpose_pd(diff(v, 0), diff(v, 1), diff(v, 2), diff(v, 3));
                         let damping = col(&self.damping);
                         let inv = _mm256_and_pd(_mm256_div_pd(one, l), pos);
                         let along = _mm256_mul_pd(
@@ -371,14 +435,55 @@ impl SpringRows {
                         _mm256_and_pd(_mm256_mul_pd(k, _mm256_sub_pd(r, one)), pos)
                     }
                 };
-                _mm256_storeu_pd(c.as_mut_ptr(), coef);
+                // Each force is its difference row times its factor broadcast: four
+                // shuffles, where a transpose back takes eight.
+                let c = [
+                    _mm256_permute4x64_pd::<0x00>(coef),
+                    _mm256_permute4x64_pd::<0x55>(coef),
+                    _mm256_permute4x64_pd::<0xaa>(coef),
+                    _mm256_permute4x64_pd::<0xff>(coef),
+                ];
                 for q in 0..4 {
-                    *buf.add(s + q) = d[q] * c[q];
+                    _mm256_store_pd(buf.add(s + q) as *mut f64, _mm256_mul_pd(d[q], c[q]));
                 }
                 s += 4;
             }
         }
         s
+    }
+
+    /// [`Self::gather`] with each slot one AVX register: the same sums, component by
+    /// component in the same order, so the same bits.
+    ///
+    /// # Safety
+    /// As for [`Self::gather`].
+    #[target_feature(enable = "avx")]
+    unsafe fn gather_avx(&self, p0: usize, p1: usize, buf: &[Slot], f: *mut Vector) {
+        use std::arch::x86_64::*;
+        for p in p0..p1 {
+            // SAFETY: as for `gather`; slots are 32-byte aligned.
+            unsafe {
+                let row = *self.row_start.get_unchecked(p) as usize
+                    ..*self.row_start.get_unchecked(p + 1) as usize;
+                let up = *self.upper_start.get_unchecked(p) as usize
+                    ..*self.upper_start.get_unchecked(p + 1) as usize;
+                if row.is_empty() && up.is_empty() {
+                    continue;
+                }
+                let mut plus = _mm256_setzero_pd();
+                for f in buf.get_unchecked(row) {
+                    plus = _mm256_add_pd(plus, _mm256_load_pd(f.0.as_ptr()));
+                }
+                let mut minus = _mm256_setzero_pd();
+                for &s in self.upper.get_unchecked(up) {
+                    let f = buf.get_unchecked(s as usize);
+                    minus = _mm256_add_pd(minus, _mm256_load_pd(f.0.as_ptr()));
+                }
+                let mut r = [0.0f64; 4];
+                _mm256_storeu_pd(r.as_mut_ptr(), _mm256_sub_pd(plus, minus));
+                *f.add(p) += Vector::new(r[0], r[1], r[2]);
+            }
+        }
     }
 }
 

@@ -55,35 +55,26 @@ impl SoftBodyPlugin {
     }
 }
 
-/// The thread pool large bodies' force kernels share (see
-/// [`SoftBodyPlugin::with_kernel_threads`]); `None`: one thread per body.
+/// The threads large bodies' force kernels share (see
+/// [`SoftBodyPlugin::with_kernel_threads`]): a [`Team`](crate::core::kernels::team::Team)
+/// whose helpers spin between the passes of a step and sleep when the simulation is idle;
+/// `None`: one thread per body. One body at a time steps on the team; a large body stepped
+/// beside it (bodies are stepped in parallel) runs on its own thread, with the same bits.
 #[derive(Resource, Clone, Default)]
 pub struct SoftBodyKernelPool {
     #[cfg(feature = "parallel")]
-    pool: Option<std::sync::Arc<rayon::ThreadPool>>,
+    team: Option<std::sync::Arc<crate::core::kernels::team::Team>>,
 }
 
 impl SoftBodyKernelPool {
-    /// A pool of `threads` threads (`0`: every core; `1`: none).
+    /// A team of `threads` threads (`0`: every core; `1`: none).
     pub fn new(threads: usize) -> Self {
         #[cfg(feature = "parallel")]
         {
-            let threads = if threads == 0 {
-                std::thread::available_parallelism().map_or(1, |n| n.get())
-            } else {
-                threads
-            };
-            let pool = (threads > 1)
-                .then(|| {
-                    rayon::ThreadPoolBuilder::new()
-                        .num_threads(threads)
-                        .thread_name(|i| format!("soft-body kernels {i}"))
-                        .build()
-                        .ok()
-                })
-                .flatten()
-                .map(std::sync::Arc::new);
-            Self { pool }
+            let team = crate::core::kernels::team::Team::new(threads);
+            Self {
+                team: (team.threads() > 1).then(|| std::sync::Arc::new(team)),
+            }
         }
         #[cfg(not(feature = "parallel"))]
         {
@@ -96,7 +87,7 @@ impl SoftBodyKernelPool {
     pub fn threads(&self) -> usize {
         #[cfg(feature = "parallel")]
         {
-            self.pool.as_ref().map_or(1, |p| p.current_num_threads())
+            self.team.as_ref().map_or(1, |t| t.threads())
         }
         #[cfg(not(feature = "parallel"))]
         {
@@ -104,17 +95,17 @@ impl SoftBodyKernelPool {
         }
     }
 
-    /// Advances `sim` one frame, on the pool when the body is large enough to be cut into
+    /// Advances `sim` one frame, on the team when the body is large enough to be cut into
     /// chunks.
     fn advance(
         &self,
         sim: &mut Simulation<ParticleState, ParticleModel>,
     ) -> Result<crate::core::driver::FrameReport, Divergence> {
         #[cfg(feature = "parallel")]
-        if let Some(pool) = &self.pool
+        if let Some(team) = &self.team
             && sim.system.is_chunked()
         {
-            return pool.install(|| sim.advance_frame());
+            return team.run(|| sim.advance_frame());
         }
         sim.advance_frame()
     }
