@@ -157,8 +157,11 @@ mod tests {
         for n in 0..14 {
             let mut vecs = |s: f64| -> Vec<Vector> {
                 (0..n)
-                    .map(|_| Vector::new(rnd() * s, rnd() * s, rnd() * s))
-                    .map(|v| v.to_array().map(|c| c as Scalar).into())
+                    .map(|_| {
+                        [rnd() * s, rnd() * s, rnd() * s]
+                            .map(|c| c as Scalar)
+                            .into()
+                    })
                     .collect()
             };
             let (x, v, f) = (vecs(2.0), vecs(5.0), vecs(300.0));
