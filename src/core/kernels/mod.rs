@@ -91,7 +91,7 @@ pub(crate) mod avx {
 }
 
 /// Runs `job(c)` for every chunk `c` in `0..chunks`: shared with the helpers of the
-/// [`team::Team`] the caller runs in (see [`with_threads`]) when the `parallel` feature is on
+/// `team::Team` the caller runs in (see [`with_threads`]) when the `parallel` feature is on
 /// and there is more than one chunk; one after another otherwise. Jobs must write disjoint
 /// memory. The bits are the same either way.
 #[inline]
@@ -107,7 +107,7 @@ pub(crate) fn for_each_chunk(chunks: usize, job: impl Fn(usize) + Sync + Send) {
 
 /// Runs `f` with a team of `threads` threads (`0`: one per core) sharing the force kernels of
 /// large bodies it steps: on this thread, with `threads − 1` helpers spawned for the call
-/// (keep a [`team::Team`] to reuse them). Without the `parallel` feature `f` simply runs, on
+/// (keep a `team::Team` to reuse them). Without the `parallel` feature `f` simply runs, on
 /// one thread. Results are the same bits for any thread count.
 pub fn with_threads<R>(threads: usize, f: impl FnOnce() -> R) -> R {
     #[cfg(feature = "parallel")]

@@ -56,8 +56,8 @@ impl SoftBodyPlugin {
 }
 
 /// The threads large bodies' force kernels share (see
-/// [`SoftBodyPlugin::with_kernel_threads`]): a [`Team`](crate::core::kernels::team::Team)
-/// whose helpers spin between the passes of a step and sleep when the simulation is idle;
+/// [`SoftBodyPlugin::with_kernel_threads`]): a `core::kernels::team::Team` (feature
+/// `parallel`) whose helpers spin between the passes of a step and sleep when the simulation is idle;
 /// `None`: one thread per body. One body at a time steps on the team; a large body stepped
 /// beside it (bodies are stepped in parallel) runs on its own thread, with the same bits.
 #[derive(Resource, Clone, Default)]
