@@ -220,6 +220,24 @@ impl SpringRows {
         });
     }
 
+    /// Particle `p`'s row (the slots it adds) and the springs where it is the upper end (the
+    /// slots it subtracts).
+    ///
+    /// # Safety
+    /// `p` is below the bound.
+    #[inline(always)]
+    unsafe fn springs_of(&self, p: usize) -> (std::ops::Range<usize>, &[u32]) {
+        // SAFETY: `p + 1` indexes the starts, which have one entry past the bound; the lists
+        // hold every spring.
+        unsafe {
+            let row = *self.row_start.get_unchecked(p) as usize
+                ..*self.row_start.get_unchecked(p + 1) as usize;
+            let up = *self.upper_start.get_unchecked(p) as usize
+                ..*self.upper_start.get_unchecked(p + 1) as usize;
+            (row, self.upper.get_unchecked(up))
+        }
+    }
+
     /// Particles `p0..p1` add their rows' slots and subtract their upper slots.
     ///
     /// # Safety
@@ -230,10 +248,7 @@ impl SpringRows {
             // SAFETY: `p` is below the bound; the layout's slots are below the number of
             // springs.
             unsafe {
-                let row = *self.row_start.get_unchecked(p) as usize
-                    ..*self.row_start.get_unchecked(p + 1) as usize;
-                let up = *self.upper_start.get_unchecked(p) as usize
-                    ..*self.upper_start.get_unchecked(p + 1) as usize;
+                let (row, up) = self.springs_of(p);
                 if row.is_empty() && up.is_empty() {
                     continue;
                 }
@@ -242,7 +257,7 @@ impl SpringRows {
                     plus += f.get();
                 }
                 let mut minus = Vector::ZERO;
-                for &s in self.upper.get_unchecked(up) {
+                for &s in up {
                     minus += buf.get_unchecked(s as usize).get();
                 }
                 *f.add(p) += plus - minus;
@@ -463,10 +478,7 @@ impl SpringRows {
         for p in p0..p1 {
             // SAFETY: as for `gather`; slots are 32-byte aligned.
             unsafe {
-                let row = *self.row_start.get_unchecked(p) as usize
-                    ..*self.row_start.get_unchecked(p + 1) as usize;
-                let up = *self.upper_start.get_unchecked(p) as usize
-                    ..*self.upper_start.get_unchecked(p + 1) as usize;
+                let (row, up) = self.springs_of(p);
                 if row.is_empty() && up.is_empty() {
                     continue;
                 }
@@ -475,7 +487,7 @@ impl SpringRows {
                     plus = _mm256_add_pd(plus, _mm256_load_pd(f.0.as_ptr()));
                 }
                 let mut minus = _mm256_setzero_pd();
-                for &s in self.upper.get_unchecked(up) {
+                for &s in up {
                     let f = buf.get_unchecked(s as usize);
                     minus = _mm256_add_pd(minus, _mm256_load_pd(f.0.as_ptr()));
                 }
