@@ -367,15 +367,14 @@ impl OdeState for ParticleState {
         // In the spring gather's particle chunks, on the team this runs in (if any): each
         // thread reads the particles it swept, where one thread reading them all would pull
         // every other thread's lines across.
-        use crate::core::kernels::{for_each_chunk, springs::CHUNK_PARTICLES};
+        use crate::core::kernels::{for_each_range, springs::CHUNK_PARTICLES};
         use std::sync::atomic::{AtomicBool, Ordering};
         let n = self.x.len();
         if self.v.len() != n {
             return slice_finite(&self.x) && slice_finite(&self.v);
         }
         let finite = AtomicBool::new(true);
-        for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-            let r = c * CHUNK_PARTICLES..((c + 1) * CHUNK_PARTICLES).min(n);
+        for_each_range(n, CHUNK_PARTICLES, |r| {
             if !(slice_finite(&self.x[r.clone()]) && slice_finite(&self.v[r])) {
                 finite.store(false, Ordering::Relaxed);
             }

@@ -105,6 +105,20 @@ pub(crate) fn for_each_chunk(chunks: usize, job: impl Fn(usize) + Sync + Send) {
     }
 }
 
+/// Runs `job(r)` for the consecutive ranges `r` of `chunk` indices that cover `0..n` (the
+/// last one shorter), as [`for_each_chunk`] runs chunks: the particle passes' chunking, in one
+/// place.
+#[inline]
+pub(crate) fn for_each_range(
+    n: usize,
+    chunk: usize,
+    job: impl Fn(std::ops::Range<usize>) + Sync + Send,
+) {
+    for_each_chunk(n.div_ceil(chunk), |c| {
+        job(c * chunk..((c + 1) * chunk).min(n))
+    });
+}
+
 /// Runs `f` with a team of `threads` threads (`0`: one per core) sharing the force kernels of
 /// large bodies it steps: on this thread, with `threads − 1` helpers spawned for the call
 /// (keep a `team::Team` to reuse them). Without the `parallel` feature `f` simply runs, on
@@ -143,6 +157,17 @@ impl<T> SharedMut<T> {
     #[inline(always)]
     pub(crate) fn ptr(self) -> *mut T {
         self.0
+    }
+
+    /// The elements `r` as a slice.
+    ///
+    /// # Safety
+    /// `r` lies within the allocation, and nothing else reads or writes it while the slice
+    /// lives (a chunk job's own range).
+    #[inline(always)]
+    pub(crate) unsafe fn slice<'a>(self, r: std::ops::Range<usize>) -> &'a mut [T] {
+        // SAFETY: as the caller guarantees.
+        unsafe { std::slice::from_raw_parts_mut(self.0.add(r.start), r.len()) }
     }
 }
 

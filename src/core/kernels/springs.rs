@@ -24,7 +24,7 @@
 //!
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
-use super::{SharedMut, for_each_chunk};
+use super::{SharedMut, for_each_range};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
@@ -189,13 +189,13 @@ impl SpringRows {
         let avx = std::arch::is_x86_feature_detected!("avx");
         #[cfg(all(target_arch = "x86_64", feature = "f64"))]
         let avx = std::arch::is_x86_feature_detected!("avx2");
-        for_each_chunk(self.chunks(), |c| {
-            let (s0, s1) = (c * CHUNK_SPRINGS, ((c + 1) * CHUNK_SPRINGS).min(m));
-            // SAFETY: indices are below the bound the caller guarantees; chunk `c` writes only
+        for_each_range(m, CHUNK_SPRINGS, |r| {
+            let s1 = r.end;
+            // SAFETY: indices are below the bound the caller guarantees; a chunk writes only
             // its own springs' slots.
             unsafe {
                 #[allow(unused_mut)]
-                let mut s = s0;
+                let mut s = r.start;
                 #[cfg(target_arch = "x86_64")]
                 if avx {
                     s = self.forces_avx(s, s1, x, v, buf.ptr());
@@ -206,16 +206,15 @@ impl SpringRows {
         let buf = &*guard;
         let n = self.row_start.len() - 1;
         let fp = SharedMut(f.as_mut_ptr());
-        for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-            let (p0, p1) = (c * CHUNK_PARTICLES, ((c + 1) * CHUNK_PARTICLES).min(n));
+        for_each_range(n, CHUNK_PARTICLES, |r| {
             // SAFETY: particles below the bound; each chunk writes its own particles only.
             unsafe {
                 #[cfg(all(target_arch = "x86_64", feature = "f64"))]
                 if avx {
-                    self.gather_avx(p0, p1, buf, fp.ptr());
+                    self.gather_avx(r.start, r.end, buf, fp.ptr());
                     return;
                 }
-                self.gather(p0, p1, buf, fp.ptr());
+                self.gather(r.start, r.end, buf, fp.ptr());
             }
         });
     }

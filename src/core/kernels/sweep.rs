@@ -9,7 +9,7 @@
 //! `Vec3A` is one register already and the reference loop is the kernel.
 
 use super::springs::CHUNK_PARTICLES;
-use super::{SharedMut, for_each_chunk};
+use super::{SharedMut, for_each_range};
 use crate::math::{Scalar, Vector};
 
 /// The sweep, one particle at a time: the reference [`sweep`] is tested against.
@@ -49,23 +49,17 @@ pub fn sweep(
     let (xp, vp) = (SharedMut(x.as_mut_ptr()), SharedMut(v.as_mut_ptr()));
     #[cfg(all(target_arch = "x86_64", feature = "f64"))]
     let avx2 = std::arch::is_x86_feature_detected!("avx2");
-    for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-        let (p0, p1) = (c * CHUNK_PARTICLES, ((c + 1) * CHUNK_PARTICLES).min(n));
+    for_each_range(n, CHUNK_PARTICLES, |r| {
         // SAFETY: chunks are disjoint ranges below `n`, the length of every slice; each
         // chunk's job alone touches its range of `x` and `v`.
-        let (x, v) = unsafe {
-            (
-                std::slice::from_raw_parts_mut(xp.ptr().add(p0), p1 - p0),
-                std::slice::from_raw_parts_mut(vp.ptr().add(p0), p1 - p0),
-            )
-        };
-        let (f, w) = (&f[p0..p1], &inv_mass[p0..p1]);
+        let (x, v) = unsafe { (xp.slice(r.clone()), vp.slice(r.clone())) };
+        let (f, w) = (&f[r.clone()], &inv_mass[r]);
         #[allow(unused_mut)]
         let mut done = 0;
         #[cfg(all(target_arch = "x86_64", feature = "f64"))]
         if avx2 {
-            let quads = (p1 - p0) / 4 * 4;
-            // SAFETY: AVX2 is present; every slice holds `p1 − p0 ≥ quads` particles.
+            let quads = x.len() / 4 * 4;
+            // SAFETY: AVX2 is present; every slice holds `x.len() ≥ quads` particles.
             unsafe { sweep_avx(quads, x, v, f, w, g, h) };
             done = quads;
         }
@@ -78,10 +72,9 @@ pub fn sweep(
 pub fn clear(f: &mut [Vector]) {
     let n = f.len();
     let fp = SharedMut(f.as_mut_ptr());
-    for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-        let (p0, p1) = (c * CHUNK_PARTICLES, ((c + 1) * CHUNK_PARTICLES).min(n));
-        // SAFETY: chunks are disjoint ranges below `n`; each chunk's job alone writes its own.
-        unsafe { std::slice::from_raw_parts_mut(fp.ptr().add(p0), p1 - p0) }.fill(Vector::ZERO);
+    // SAFETY: chunks are disjoint ranges below `n`; each chunk's job alone writes its own.
+    for_each_range(n, CHUNK_PARTICLES, |r| {
+        unsafe { fp.slice(r) }.fill(Vector::ZERO)
     });
 }
 

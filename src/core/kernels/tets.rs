@@ -18,7 +18,7 @@
 //!
 //! [`Tets::accumulate_f64`]: crate::core::fem::Tets::accumulate_f64
 
-use super::{SharedMut, for_each_chunk};
+use super::{SharedMut, for_each_range};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
@@ -165,9 +165,9 @@ impl TetForces {
         let m = self.elements.len();
         #[cfg(target_arch = "x86_64")]
         let avx = std::arch::is_x86_feature_detected!("avx");
-        for_each_chunk(m.div_ceil(CHUNK_TETS), |c| {
+        for_each_range(m, CHUNK_TETS, |r| {
             #[allow(unused_mut)]
-            let mut range = c * CHUNK_TETS..((c + 1) * CHUNK_TETS).min(m);
+            let mut range = r;
             #[cfg(target_arch = "x86_64")]
             if avx {
                 // SAFETY: AVX is present; as below (chunks start at multiples of `W`).
@@ -188,8 +188,8 @@ impl TetForces {
         let buf = &*guard;
         let n = self.start.len() - 1;
         let fp = SharedMut(f.as_mut_ptr());
-        for_each_chunk(n.div_ceil(CHUNK_PARTICLES), |c| {
-            for p in c * CHUNK_PARTICLES..((c + 1) * CHUNK_PARTICLES).min(n) {
+        for_each_range(n, CHUNK_PARTICLES, |r| {
+            for p in r {
                 // SAFETY: `p` is below the bound; each chunk writes its own particles only.
                 unsafe {
                     let (s0, s1) = (
