@@ -617,7 +617,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             let t_new = t_new64 as Scalar;
             self.system.apply_constraints(t_new, &mut self.state);
             self.system.resolve_contacts(t_new, taken, &mut self.state);
-            if !self.state.is_finite() {
+            if !self.system.stepped_state_is_finite(&self.state) {
                 self.state.copy_from(&self.backup);
                 self.time64 = t_start;
                 self.time = t_start as Scalar;

@@ -108,6 +108,15 @@ pub trait OdeSystem<S: OdeState>: Sync {
         false
     }
 
+    /// Whether `state` — just advanced by one integrator step of this system, then
+    /// constrained ([`OdeSystem::apply_constraints`]) and its contacts resolved
+    /// ([`OdeSystem::resolve_contacts`]) — is finite everywhere. The default checks every
+    /// component; a system whose step checked what it wrote as it wrote it may answer from
+    /// that, sparing a pass over the state.
+    fn stepped_state_is_finite(&self, state: &S) -> bool {
+        state.is_finite()
+    }
+
     /// How fast the system moves in `state` at `t`, for sleeping: the largest speed of a free
     /// part, when nothing drives it but steady forces (no moving pins or colliders, no gusts,
     /// no field that changes with time); `None` (the default) when something does, or the

@@ -251,6 +251,28 @@ impl Tets {
         unsafe { fast.accumulate(x, f) }
     }
 
+    /// Sets `f` to the elastic forces — the bits of zeroing it and [`Tets::accumulate`] —
+    /// then runs `finish` on each chunk of particles, on the thread that summed its forces
+    /// (see [`crate::core::kernels::gather_then`]).
+    ///
+    /// # Panics
+    /// As [`Tets::accumulate`], or if `v` differs from `x` in length.
+    pub(crate) fn set_then(
+        &self,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        f: &mut [Vector],
+        finish: crate::core::kernels::Finish<'_>,
+    ) {
+        let fast = self.fast();
+        assert!(
+            f.len() == x.len() && v.len() == x.len() && fast.bound() <= x.len(),
+            "tets refer past the state, or state and forces differ in length"
+        );
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { fast.set_then(x, v, f, finish) }
+    }
+
     /// The elastic energy from the fast kernel's layout: each element's in the build's
     /// precision, summed in f64 — [`Self::energy`] to that precision's round-off, several
     /// times faster. The divergence guard's check; energy reports use [`Self::energy`].
@@ -262,6 +284,15 @@ impl Tets {
         assert!(fast.bound() <= x.len(), "tets refer past the state");
         // SAFETY: index bound checked just above.
         unsafe { fast.energy(x) }
+    }
+
+    /// Number of chunks of the fast kernel's passes (parallel work units).
+    pub fn chunks(&self) -> usize {
+        if self.tets.is_empty() {
+            0
+        } else {
+            self.fast().chunks()
+        }
     }
 
     fn fast(&self) -> &crate::core::kernels::tets::TetForces {

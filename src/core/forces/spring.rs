@@ -194,6 +194,29 @@ impl Springs {
         unsafe { self.rows().accumulate(x, v, f) }
     }
 
+    /// Sets `f` to the spring (and damper) forces — the bits of zeroing it and
+    /// [`Springs::accumulate`] — then runs `finish` on each chunk of particles, on the thread
+    /// that summed its forces (see [`crate::core::kernels::gather_then`]).
+    ///
+    /// # Panics
+    /// As [`Springs::accumulate`].
+    pub(crate) fn set_then(
+        &self,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        f: &mut [Vector],
+        finish: crate::core::kernels::Finish<'_>,
+    ) {
+        let n = x.len();
+        assert!(
+            v.len() == n && f.len() == n,
+            "state and force arrays differ in length"
+        );
+        self.check_bound(n);
+        // SAFETY: lengths and index bound checked just above.
+        unsafe { self.rows().set_then(x, v, self.damped > 0, f, finish) }
+    }
+
     /// Adds only the elastic part of the spring forces (dampers left out), for methods that
     /// treat damping implicitly.
     pub fn accumulate_elastic(&self, x: &[Vector], f: &mut [Vector]) {

@@ -17,23 +17,22 @@
 //! each addition waits for the store of the last one to the same particle. The kernel before
 //! this one kept each row's sum in a register but still scattered every spring's force to
 //! `f_j` as it went, with spill slots where another thread owned `j`: 1.4–1.5× slower than
-//! these two passes on a 64² cloth. Here no pass writes where another reads: the force pass is
-//! cut into chunks of [`CHUNK_SPRINGS`] springs, the gather into chunks of
-//! [`CHUNK_PARTICLES`] particles, by the body's size alone, so every sum has the same order
-//! on any number of threads.
+//! these two passes on a 64² cloth. Here no pass writes where another reads. Both passes are
+//! cut into the same chunks of at most [`CHUNK_PARTICLES`] particles (the force pass takes their
+//! rows), by the body's size alone, so every sum has the same order on any number of threads,
+//! and a thread gathers the slots its own force pass wrote: only the springs that reach into
+//! the next chunk pass their forces, and the positions they read, between cores.
 //!
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
-use super::{SharedMut, for_each_range};
+use super::{ChunkLists, SharedMut, for_each_range};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
 
-/// Springs per chunk of the force pass, the unit of parallel work (about 5 µs of work: large
-/// enough that handing it to a thread costs little, small enough that two threads stay
-/// balanced). A multiple of eight, so the AVX groups never straddle chunks.
-pub const CHUNK_SPRINGS: usize = 4096;
-/// Particles per chunk of the gather pass.
+/// Most particles per chunk, the unit of parallel work of both passes: the force pass takes the
+/// chunk's rows (a cloth's 6 springs a particle: about 9 µs of work on one core, with the
+/// gather and sweep that follow), large enough that handing it to a thread costs little.
 pub const CHUNK_PARTICLES: usize = 1024;
 
 /// A spring's force in the buffer between the two passes: a `Vec3A` (one 16-byte lane group)
@@ -105,6 +104,10 @@ pub struct SpringRows {
     upper: Vec<u32>,
     /// Each spring's force on its lower particle, from the force pass.
     buffer: Mutex<Vec<Slot>>,
+    /// Particles per chunk of both passes (see [`super::chunk_size`]).
+    chunk: usize,
+    /// For each chunk, its particles that springs in another chunk's rows reach.
+    border: ChunkLists,
 }
 
 impl SpringRows {
@@ -158,6 +161,15 @@ impl SpringRows {
             upper[next[c.j as usize] as usize] = s as u32;
             next[c.j as usize] += 1;
         }
+        // The upper ends of springs that reach from a chunk's rows into another chunk.
+        let chunk = super::chunk_size(bound, CHUNK_PARTICLES);
+        let chunk_of = |p: u32| p as usize / chunk;
+        let crossing = || {
+            (cols.iter().zip(&col_i).enumerate())
+                .filter(|(_, (c, i))| chunk_of(c.j) != chunk_of(**i))
+        };
+        let border = ChunkLists::new(crossing().map(|(_, (c, _))| (chunk_of(c.j), c.j)));
+
         Self {
             j: cols.iter().map(|c| c.j).collect(),
             rest: cols.iter().map(|c| c.rest).collect(),
@@ -168,12 +180,14 @@ impl SpringRows {
             upper_start,
             upper,
             buffer: Mutex::new(vec![Slot::default(); total]),
+            chunk,
+            border,
         }
     }
 
     /// Number of chunks of the force pass (parallel work units).
     pub fn chunks(&self) -> usize {
-        self.j.len().div_ceil(CHUNK_SPRINGS)
+        self.bound().div_ceil(self.chunk)
     }
 
     /// Adds the spring forces into `f`, with the dampers' when `v` is given.
@@ -182,14 +196,62 @@ impl SpringRows {
     /// `x`, `v` (when given) and `f` hold every particle any spring refers to.
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], v: Option<&[Vector]>, f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
-        let buf = SharedMut(guard.as_mut_ptr());
-        let m = self.j.len();
+        // SAFETY: as the caller guarantees.
+        unsafe { self.force_pass(x, v, &mut guard) };
+        let buf = &*guard;
+        let fp = SharedMut(f.as_mut_ptr());
+        for_each_range(self.bound(), self.chunk, |r| {
+            // SAFETY: particles below the bound; each chunk writes its own particles only.
+            unsafe { self.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
+        });
+    }
+
+    /// Sets `f` to the spring forces (with the dampers' when `damped`), as if it were zeroed
+    /// first and [`Self::accumulate`]d into (the same bits), then runs `finish` on each chunk
+    /// of particles on the thread that gathered it ([`super::gather_then`]).
+    ///
+    /// # Safety
+    /// `x`, `v` and `f` hold every particle any spring refers to.
+    pub(crate) unsafe fn set_then(
+        &self,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        damped: bool,
+        f: &mut [Vector],
+        finish: super::Finish<'_>,
+    ) {
+        let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
+        // SAFETY: as the caller guarantees.
+        unsafe { self.force_pass(x, damped.then_some(&*v), &mut guard) };
+        let buf = &*guard;
+        let bound = self.bound();
+        let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
+            let end = r.end.min(bound).max(r.start);
+            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+            unsafe { self.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+            f[end - r.start..].fill(Vector::ZERO);
+        };
+        super::gather_then(x, v, f, self.chunk, &self.border, gather, finish);
+    }
+
+    /// One more than the largest particle index a spring refers to.
+    pub fn bound(&self) -> usize {
+        self.row_start.len() - 1
+    }
+
+    /// The force pass: every spring's force on its lower particle into its slot of `buf`.
+    ///
+    /// # Safety
+    /// `x` and `v` (when given) hold every particle any spring refers to.
+    unsafe fn force_pass(&self, x: &[Vector], v: Option<&[Vector]>, buf: &mut [Slot]) {
+        let buf = SharedMut(buf.as_mut_ptr());
         // The f64 kernels broadcast lanes across the register's halves (AVX2).
         #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
         let avx = std::arch::is_x86_feature_detected!("avx");
         #[cfg(all(target_arch = "x86_64", feature = "f64"))]
         let avx = std::arch::is_x86_feature_detected!("avx2");
-        for_each_range(m, CHUNK_SPRINGS, |r| {
+        for_each_range(self.bound(), self.chunk, |c| {
+            let r = self.row_start[c.start] as usize..self.row_start[c.end] as usize;
             let s1 = r.end;
             // SAFETY: indices are below the bound the caller guarantees; a chunk writes only
             // its own springs' slots.
@@ -203,20 +265,25 @@ impl SpringRows {
                 self.forces(s, s1, x, v, buf.ptr());
             }
         });
-        let buf = &*guard;
-        let n = self.row_start.len() - 1;
-        let fp = SharedMut(f.as_mut_ptr());
-        for_each_range(n, CHUNK_PARTICLES, |r| {
-            // SAFETY: particles below the bound; each chunk writes its own particles only.
-            unsafe {
-                #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-                if avx {
-                    self.gather_avx(r.start, r.end, buf, fp.ptr());
-                    return;
-                }
-                self.gather(r.start, r.end, buf, fp.ptr());
+    }
+
+    /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
+    /// (as `0 + sum`, the bits of adding to a zeroed force), in registers where the build has a
+    /// faster form.
+    ///
+    /// # Safety
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
+    #[inline(always)]
+    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+        // SAFETY: as the caller guarantees.
+        unsafe {
+            #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+            if std::arch::is_x86_feature_detected!("avx") {
+                self.gather_avx(p0, p1, buf, out, set);
+                return;
             }
-        });
+            self.gather(p0, p1, buf, out, set);
+        }
     }
 
     /// Particle `p`'s row (the slots it adds) and the springs where it is the upper end (the
@@ -237,29 +304,46 @@ impl SpringRows {
         }
     }
 
-    /// Particles `p0..p1` add their rows' slots and subtract their upper slots.
+    /// Particles `p0..p1` add their rows' slots and subtract their upper slots, into
+    /// `out[p − p0]` as [`Self::gather_chunk`] says.
     ///
     /// # Safety
-    /// `p1 ≤` the bound; `f` points to at least `p1` vectors.
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
     #[inline(always)]
-    unsafe fn gather(&self, p0: usize, p1: usize, buf: &[Slot], f: *mut Vector) {
+    unsafe fn gather(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
         for p in p0..p1 {
             // SAFETY: `p` is below the bound; the layout's slots are below the number of
             // springs.
             unsafe {
                 let (row, up) = self.springs_of(p);
+                let f = out.add(p - p0);
+                let base = if set { Vector::ZERO } else { *f };
                 if row.is_empty() && up.is_empty() {
+                    *f = base;
                     continue;
                 }
+                // Four terms a round, still added one after another (the same bits as one
+                // loop): fewer loop branches, and a loop body the processor's front end
+                // takes whole wherever the code lands (one loop a term ran 30 % slower in
+                // some builds than in others, by where its branches fell).
                 let mut plus = Vector::ZERO;
-                for f in buf.get_unchecked(row) {
-                    plus += f.get();
+                let mut row = buf.get_unchecked(row).chunks_exact(4);
+                for q in &mut row {
+                    plus = plus + q[0].get() + q[1].get() + q[2].get() + q[3].get();
+                }
+                for q in row.remainder() {
+                    plus += q.get();
                 }
                 let mut minus = Vector::ZERO;
-                for &s in up {
-                    minus += buf.get_unchecked(s as usize).get();
+                let slot = |s: u32| buf.get_unchecked(s as usize).get();
+                let mut up = up.chunks_exact(4);
+                for q in &mut up {
+                    minus = minus + slot(q[0]) + slot(q[1]) + slot(q[2]) + slot(q[3]);
                 }
-                *f.add(p) += plus - minus;
+                for &q in up.remainder() {
+                    minus += slot(q);
+                }
+                *f = base + (plus - minus);
             }
         }
     }
@@ -472,13 +556,16 @@ impl SpringRows {
     /// # Safety
     /// As for [`Self::gather`].
     #[target_feature(enable = "avx")]
-    unsafe fn gather_avx(&self, p0: usize, p1: usize, buf: &[Slot], f: *mut Vector) {
+    unsafe fn gather_avx(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
         use std::arch::x86_64::*;
         for p in p0..p1 {
             // SAFETY: as for `gather`; slots are 32-byte aligned.
             unsafe {
                 let (row, up) = self.springs_of(p);
+                let f = out.add(p - p0);
+                let base = if set { Vector::ZERO } else { *f };
                 if row.is_empty() && up.is_empty() {
+                    *f = base;
                     continue;
                 }
                 let mut plus = _mm256_setzero_pd();
@@ -492,7 +579,7 @@ impl SpringRows {
                 }
                 let mut r = [0.0f64; 4];
                 _mm256_storeu_pd(r.as_mut_ptr(), _mm256_sub_pd(plus, minus));
-                *f.add(p) += Vector::new(r[0], r[1], r[2]);
+                *f = base + Vector::new(r[0], r[1], r[2]);
             }
         }
     }
@@ -515,6 +602,8 @@ impl Clone for SpringRows {
             upper_start: self.upper_start.clone(),
             upper: self.upper.clone(),
             buffer: Mutex::new(buffer),
+            chunk: self.chunk,
+            border: self.border.clone(),
         }
     }
 }

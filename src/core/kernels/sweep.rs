@@ -47,24 +47,44 @@ pub fn sweep(
 ) {
     let n = x.len().min(v.len()).min(f.len()).min(inv_mass.len());
     let (xp, vp) = (SharedMut(x.as_mut_ptr()), SharedMut(v.as_mut_ptr()));
-    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-    let avx2 = std::arch::is_x86_feature_detected!("avx2");
     for_each_range(n, CHUNK_PARTICLES, |r| {
         // SAFETY: chunks are disjoint ranges below `n`, the length of every slice; each
         // chunk's job alone touches its range of `x` and `v`.
         let (x, v) = unsafe { (xp.slice(r.clone()), vp.slice(r.clone())) };
-        let (f, w) = (&f[r.clone()], &inv_mass[r]);
-        #[allow(unused_mut)]
-        let mut done = 0;
-        #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-        if avx2 {
-            let quads = x.len() / 4 * 4;
-            // SAFETY: AVX2 is present; every slice holds `x.len() ≥ quads` particles.
-            unsafe { sweep_avx(quads, x, v, f, w, g, h) };
-            done = quads;
-        }
-        sweep_reference(&mut x[done..], &mut v[done..], &f[done..], &w[done..], g, h);
+        sweep_chunk(x, v, &f[r.clone()], &inv_mass[r], g, h);
     });
+}
+
+/// The sweep of one run of particles on this thread: [`sweep_reference`] over the shortest
+/// of the four slices, in whole registers where the build has a faster form (the same bits).
+/// The chunk job of [`sweep`], and of the force kernels' fused passes.
+#[inline]
+pub fn sweep_chunk(
+    x: &mut [Vector],
+    v: &mut [Vector],
+    f: &[Vector],
+    inv_mass: &[Scalar],
+    g: Vector,
+    h: Scalar,
+) {
+    let n = x.len().min(v.len()).min(f.len()).min(inv_mass.len());
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        let quads = n / 4 * 4;
+        // SAFETY: AVX2 is present; every slice holds `n ≥ quads` particles.
+        unsafe { sweep_avx(quads, x, v, f, inv_mass, g, h) };
+        done = quads;
+    }
+    sweep_reference(
+        &mut x[done..n],
+        &mut v[done..n],
+        &f[done..n],
+        &inv_mass[done..n],
+        g,
+        h,
+    );
 }
 
 /// Sets every force to zero, in the sweep's chunks (each thread clears the forces it will

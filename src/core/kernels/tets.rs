@@ -5,10 +5,12 @@
 //! Each element keeps what its force needs and nothing else: its four particles, the gradients
 //! `g₁, g₂, g₃` of its shape functions (`g₀ = −(g₁ + g₂ + g₃)`), its rest volume and the
 //! material's `C`, `D`. `F = Σₐ (xₐ − x₀) gₐᵀ` uses edge vectors, which keeps f32 accurate far
-//! from the origin. Forces go first to a per-element buffer (chunks of [`CHUNK_TETS`]
-//! elements), then each particle sums its elements' forces in a fixed order (chunks of
-//! [`CHUNK_PARTICLES`] particles): no two threads write the same memory, and the order of
-//! every sum is independent of the thread count.
+//! from the origin. Forces go first to a per-element buffer, then each particle sums its
+//! elements' forces in a fixed order (the elements' as given). Both passes are cut into the
+//! same chunks of at most [`CHUNK_PARTICLES`] particles, an element going with the chunk of
+//! its lowest vertex: no two threads write the same memory, the order of every sum is
+//! independent of the thread count, and a thread gathers the slots its own element pass
+//! wrote.
 //!
 //! Where the processor has AVX, the element pass takes eight elements at a time (four in the
 //! f64 build) from a copy of their data laid out by lanes (`Lanes`): the same operations as
@@ -18,16 +20,16 @@
 //!
 //! [`Tets::accumulate_f64`]: crate::core::fem::Tets::accumulate_f64
 
-use super::{SharedMut, for_each_range};
+use super::{ChunkLists, SharedMut, for_each_chunk, for_each_range};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
 use std::sync::Mutex;
 
 /// Elements per chunk of the element pass.
-pub const CHUNK_TETS: usize = 256;
-/// Particles per chunk of the gather pass.
-pub const CHUNK_PARTICLES: usize = 256;
+/// Most particles per chunk, the unit of parallel work of both passes (a tet mesh has about
+/// four elements a particle: 5 to 6 µs of work on one core, elements, gather and sweep).
+pub const CHUNK_PARTICLES: usize = 128;
 
 #[derive(Clone, Copy, Debug)]
 struct Element {
@@ -59,11 +61,19 @@ pub struct TetForces {
     /// The elements of every whole group of [`lane::W`], by lanes.
     #[cfg(target_arch = "x86_64")]
     lanes: Vec<Lanes>,
-    /// For particle `p`, its element-force slots are `slots[start[p]..start[p + 1]]`.
+    /// For particle `p`, its element-force slots are `slots[start[p]..start[p + 1]]`, in the
+    /// order of the elements as given (so sums do not depend on the layout's order).
     start: Vec<u32>,
     /// Slot `4 t + a`: element `t`'s force on its vertex `a`.
     slots: Vec<u32>,
     buffer: Mutex<Vec<Vector>>,
+    /// Particles per chunk of both passes (see [`super::chunk_size`]).
+    chunk: usize,
+    /// The elements of particle chunk `c`, those whose lowest vertex is in it, are
+    /// `elements[element_start[c]..element_start[c + 1]]`.
+    element_start: Vec<u32>,
+    /// For each chunk, its particles that elements of other chunks reach.
+    border: ChunkLists,
 }
 
 impl TetForces {
@@ -83,15 +93,33 @@ impl TetForces {
         )
     }
 
-    fn layout(elements: Vec<Element>) -> Self {
-        let bound = elements
+    fn layout(given: Vec<Element>) -> Self {
+        let bound = given
             .iter()
             .flat_map(|t| t.v)
             .map(|i| i as usize + 1)
             .max()
             .unwrap_or(0);
+        // Elements by the chunk of their lowest vertex (stably), so that a thread's element
+        // pass writes the slots its gather reads, and reads its own particles but at the
+        // chunks' borders.
+        let chunk = super::chunk_size(bound, CHUNK_PARTICLES);
+        let chunk_of = |e: &Element| e.v.iter().min().map_or(0, |&p| p as usize / chunk);
+        let mut order: Vec<usize> = (0..given.len()).collect();
+        order.sort_by_key(|&k| chunk_of(&given[k]));
+        let mut element_start = vec![0u32; bound.div_ceil(chunk) + 1];
+        for e in &given {
+            element_start[chunk_of(e) + 1] += 1;
+        }
+        for c in 1..element_start.len() {
+            element_start[c] += element_start[c - 1];
+        }
+        let mut new_index = vec![0usize; given.len()];
+        for (k, &g) in order.iter().enumerate() {
+            new_index[g] = k;
+        }
         let mut start = vec![0u32; bound + 1];
-        for t in &elements {
+        for t in &given {
             for &p in &t.v {
                 start[p as usize + 1] += 1;
             }
@@ -100,13 +128,21 @@ impl TetForces {
             start[p + 1] += start[p];
         }
         let mut next = start.clone();
-        let mut slots = vec![0u32; 4 * elements.len()];
-        for (k, t) in elements.iter().enumerate() {
+        let mut slots = vec![0u32; 4 * given.len()];
+        for (g, t) in given.iter().enumerate() {
             for (a, &p) in t.v.iter().enumerate() {
-                slots[next[p as usize] as usize] = (4 * k + a) as u32;
+                slots[next[p as usize] as usize] = (4 * new_index[g] + a) as u32;
                 next[p as usize] += 1;
             }
         }
+        let elements: Vec<Element> = order.iter().map(|&k| given[k]).collect();
+        let border = ChunkLists::new(
+            elements
+                .iter()
+                .flat_map(|e| e.v.map(|p| (chunk_of(e), p)))
+                .filter(|&(c, p)| p as usize / chunk != c)
+                .map(|(_, p)| (p as usize / chunk, p)),
+        );
         #[cfg(target_arch = "x86_64")]
         let lanes = elements
             .chunks_exact(lane::W)
@@ -125,7 +161,15 @@ impl TetForces {
             slots,
             buffer: Mutex::new(vec![Vector::ZERO; 4 * elements.len()]),
             elements,
+            chunk,
+            element_start,
+            border,
         }
+    }
+
+    /// Number of chunks of the passes (parallel work units).
+    pub fn chunks(&self) -> usize {
+        self.element_start.len() - 1
     }
 
     /// The elastic energy `Σ V ψ(F)`, each element's in the build's precision with
@@ -161,52 +205,127 @@ impl TetForces {
     /// `x` and `f` hold every particle any element refers to.
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
-        let buf = SharedMut(guard.as_mut_ptr());
-        let m = self.elements.len();
+        // SAFETY: as the caller guarantees.
+        unsafe { self.force_pass(x, &mut guard) };
+        let buf = &*guard;
+        let fp = SharedMut(f.as_mut_ptr());
+        for_each_range(self.bound(), self.chunk, |r| {
+            // SAFETY: particles below the bound; each chunk writes its own particles only.
+            unsafe { self.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
+        });
+    }
+
+    /// Sets `f` to the elastic forces, as if it were zeroed first and
+    /// [`Self::accumulate`]d into (the same bits), then runs `finish` on each chunk of
+    /// particles on the thread that gathered it ([`super::gather_then`]).
+    ///
+    /// # Safety
+    /// `x`, `v` and `f` hold every particle any element refers to.
+    pub(crate) unsafe fn set_then(
+        &self,
+        x: &mut [Vector],
+        v: &mut [Vector],
+        f: &mut [Vector],
+        finish: super::Finish<'_>,
+    ) {
+        let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
+        // SAFETY: as the caller guarantees.
+        unsafe { self.force_pass(x, &mut guard) };
+        let buf = &*guard;
+        let bound = self.bound();
+        let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
+            let end = r.end.min(bound).max(r.start);
+            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+            unsafe { self.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+            f[end - r.start..].fill(Vector::ZERO);
+        };
+        super::gather_then(x, v, f, self.chunk, &self.border, gather, finish);
+    }
+
+    /// The force pass: every element's forces on its four particles into its slots of `buf`.
+    ///
+    /// # Safety
+    /// `x` holds every particle any element refers to.
+    unsafe fn force_pass(&self, x: &[Vector], buf: &mut [Vector]) {
+        let buf = SharedMut(buf.as_mut_ptr());
         #[cfg(target_arch = "x86_64")]
         let avx = std::arch::is_x86_feature_detected!("avx");
-        for_each_range(m, CHUNK_TETS, |r| {
+        for_each_chunk(self.chunks(), |c| {
+            let (e0, e1) = (
+                self.element_start[c] as usize,
+                self.element_start[c + 1] as usize,
+            );
+            // The lanes take whole groups of `W` elements from the layout's start: the
+            // elements before the chunk's first whole group, and after its last, one by one.
             #[allow(unused_mut)]
-            let mut range = r;
+            let (mut head, mut tail) = (e0..e1, e1..e1);
             #[cfg(target_arch = "x86_64")]
             if avx {
-                // SAFETY: AVX is present; as below (chunks start at multiples of `W`).
-                range.start = unsafe { self.elements_avx(range.clone(), x, buf.ptr()) };
+                let first = e0.next_multiple_of(lane::W).min(e1);
+                head = e0..first;
+                // SAFETY: AVX is present; `first` is a multiple of `W` (or `e1`); as below.
+                tail = unsafe { self.elements_avx(first..e1, x, buf.ptr()) }..e1;
             }
-            for (e, t) in self.elements[range.clone()].iter().zip(range) {
-                // SAFETY: particle indices are below the bound the caller guarantees; element
-                // `t` writes only its own four slots.
-                unsafe {
-                    let out = element_forces(e, x);
-                    let b = buf.ptr().add(4 * t);
-                    for (a, fa) in out.into_iter().enumerate() {
-                        *b.add(a) = fa;
+            for range in [head, tail] {
+                for (e, t) in self.elements[range.clone()].iter().zip(range) {
+                    // SAFETY: particle indices are below the bound the caller guarantees;
+                    // element `t` writes only its own four slots.
+                    unsafe {
+                        let out = element_forces(e, x);
+                        let b = buf.ptr().add(4 * t);
+                        for (a, fa) in out.into_iter().enumerate() {
+                            *b.add(a) = fa;
+                        }
                     }
                 }
             }
         });
-        let buf = &*guard;
-        let n = self.start.len() - 1;
-        let fp = SharedMut(f.as_mut_ptr());
-        for_each_range(n, CHUNK_PARTICLES, |r| {
-            for p in r {
-                // SAFETY: `p` is below the bound; each chunk writes its own particles only.
-                unsafe {
-                    let (s0, s1) = (
-                        *self.start.get_unchecked(p),
-                        *self.start.get_unchecked(p + 1),
-                    );
-                    if s0 == s1 {
-                        continue;
-                    }
-                    let mut acc = Vector::ZERO;
-                    for &s in self.slots.get_unchecked(s0 as usize..s1 as usize) {
-                        acc += *buf.get_unchecked(s as usize);
-                    }
-                    *fp.ptr().add(p) += acc;
+    }
+
+    /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
+    /// (as `0 + sum`, the bits of adding to a zeroed force).
+    ///
+    /// # Safety
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
+    #[inline(always)]
+    unsafe fn gather_chunk(
+        &self,
+        p0: usize,
+        p1: usize,
+        buf: &[Vector],
+        out: *mut Vector,
+        set: bool,
+    ) {
+        for p in p0..p1 {
+            // SAFETY: `p` is below the bound; slots are below the buffer's length.
+            unsafe {
+                let f = out.add(p - p0);
+                let base = if set { Vector::ZERO } else { *f };
+                let (s0, s1) = (
+                    *self.start.get_unchecked(p),
+                    *self.start.get_unchecked(p + 1),
+                );
+                if s0 == s1 {
+                    *f = base;
+                    continue;
                 }
+                // Four terms a round, still added one after another (the same bits as one
+                // loop), as in the spring gather.
+                let mut acc = Vector::ZERO;
+                let slot = |s: u32| *buf.get_unchecked(s as usize);
+                let mut list = self
+                    .slots
+                    .get_unchecked(s0 as usize..s1 as usize)
+                    .chunks_exact(4);
+                for q in &mut list {
+                    acc = acc + slot(q[0]) + slot(q[1]) + slot(q[2]) + slot(q[3]);
+                }
+                for &q in list.remainder() {
+                    acc += slot(q);
+                }
+                *f = base + acc;
             }
-        });
+        }
     }
 }
 
@@ -574,6 +693,9 @@ impl Clone for TetForces {
             start: self.start.clone(),
             slots: self.slots.clone(),
             buffer: Mutex::new(buffer),
+            chunk: self.chunk,
+            element_start: self.element_start.clone(),
+            border: self.border.clone(),
         }
     }
 }
