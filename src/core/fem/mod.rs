@@ -253,7 +253,7 @@ impl Tets {
 
     /// Sets `f` to the elastic forces — the bits of zeroing it and [`Tets::accumulate`] —
     /// then runs `finish` on each chunk of particles, on the thread that summed its forces
-    /// (see [`crate::core::kernels::gather_then`]).
+    /// (see [`crate::core::kernels::Chunk`]).
     ///
     /// # Panics
     /// As [`Tets::accumulate`], or if `v` differs from `x` in length.

@@ -196,7 +196,7 @@ impl Springs {
 
     /// Sets `f` to the spring (and damper) forces — the bits of zeroing it and
     /// [`Springs::accumulate`] — then runs `finish` on each chunk of particles, on the thread
-    /// that summed its forces (see [`crate::core::kernels::gather_then`]).
+    /// that summed its forces (see [`crate::core::kernels::Chunk`]).
     ///
     /// # Panics
     /// As [`Springs::accumulate`].

@@ -121,7 +121,7 @@ pub(crate) fn for_each_range(
     });
 }
 
-/// One chunk of a fused particle pass ([`gather_then`]): its particles' positions, velocities
+/// One chunk of a fused particle pass (a force kernel's gather and what follows it): its particles' positions, velocities
 /// and the forces the kernel has just set for them.
 pub struct Chunk<'a> {
     /// The particles' indices.
@@ -207,6 +207,69 @@ pub(crate) fn claim_lines<T>(s: &mut [T], items: &[u32], base: usize) {
     }
 }
 
+/// A kernel's gather: every particle sums the slots its elements' force pass wrote, in a fixed
+/// order, in chunks of particles that the force pass shares.
+pub(crate) trait Gather: Sync {
+    /// What the force pass writes per slot.
+    type Slot: Sync;
+    /// One more than the largest particle index an element refers to.
+    fn bound(&self) -> usize;
+    /// Particles per chunk of both passes.
+    fn chunk(&self) -> usize;
+    /// For each chunk, its particles that other chunks' elements read.
+    fn border(&self) -> &ChunkLists;
+    /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
+    /// (as `0 + sum`, the bits of adding to a zeroed force).
+    ///
+    /// # Safety
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors; `buf` is the force
+    /// pass's.
+    unsafe fn gather_chunk(
+        &self,
+        p0: usize,
+        p1: usize,
+        buf: &[Self::Slot],
+        out: *mut Vector,
+        set: bool,
+    );
+}
+
+/// Adds every particle's gathered force into `f`, in the kernel's chunks on the team.
+///
+/// # Safety
+/// `f` holds the kernel's particles; `buf` is its force pass's.
+pub(crate) unsafe fn gather_add<K: Gather>(kernel: &K, buf: &[K::Slot], f: &mut [Vector]) {
+    assert!(f.len() >= kernel.bound(), "forces past the array");
+    let fp = SharedMut(f.as_mut_ptr());
+    for_each_range(kernel.bound(), kernel.chunk(), |r| {
+        // SAFETY: particles below the bound; each chunk writes its own particles only.
+        unsafe { kernel.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
+    });
+}
+
+/// Sets `f` to every particle's gathered force (zero past the kernel's particles), then runs
+/// `finish` on each chunk, in one pass ([`gather_then`]).
+///
+/// # Safety
+/// `buf` is the kernel's force pass's.
+pub(crate) unsafe fn gather_set_then<K: Gather>(
+    kernel: &K,
+    buf: &[K::Slot],
+    x: &mut [Vector],
+    v: &mut [Vector],
+    f: &mut [Vector],
+    finish: Finish<'_>,
+) {
+    let bound = kernel.bound();
+    let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
+        let end = r.end.min(bound).max(r.start);
+        // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+        f[end - r.start..].fill(Vector::ZERO);
+    };
+    gather_then(x, v, f, kernel.chunk(), kernel.border(), gather, finish);
+}
+
 /// A force kernel's particle pass fused with what follows it: for every chunk `r` of `chunk`
 /// particles covering all of `f`, `gather(r, f[r])` sets the chunk's forces, then
 /// `finish` runs on the chunk, on the same thread (shared with the team as
@@ -224,7 +287,7 @@ pub(crate) fn claim_lines<T>(s: &mut [T], items: &[u32], base: usize) {
 ///
 /// # Panics
 /// If `x`, `v` and `f` differ in length.
-pub(crate) fn gather_then(
+fn gather_then(
     x: &mut [Vector],
     v: &mut [Vector],
     f: &mut [Vector],

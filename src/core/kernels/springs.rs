@@ -40,13 +40,13 @@ pub const CHUNK_PARTICLES: usize = 1024;
 /// force pass stores a whole AVX register per spring and the gather adds one per slot (a
 /// `DVec3`'s 24 bytes straddle registers).
 #[cfg(not(feature = "f64"))]
-type Slot = Vector;
+pub(crate) type Slot = Vector;
 
 /// See the f32 build's `Slot`.
 #[cfg(feature = "f64")]
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
-struct Slot([f64; 4]);
+pub(crate) struct Slot([f64; 4]);
 
 /// Storing and reading a force in a [`Slot`].
 trait SlotExt {
@@ -197,18 +197,15 @@ impl SpringRows {
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], v: Option<&[Vector]>, f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
-        unsafe { self.force_pass(x, v, &mut guard) };
-        let buf = &*guard;
-        let fp = SharedMut(f.as_mut_ptr());
-        for_each_range(self.bound(), self.chunk, |r| {
-            // SAFETY: particles below the bound; each chunk writes its own particles only.
-            unsafe { self.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
-        });
+        unsafe {
+            self.force_pass(x, v, &mut guard);
+            super::gather_add(self, &guard, f);
+        }
     }
 
     /// Sets `f` to the spring forces (with the dampers' when `damped`), as if it were zeroed
     /// first and [`Self::accumulate`]d into (the same bits), then runs `finish` on each chunk
-    /// of particles on the thread that gathered it ([`super::gather_then`]).
+    /// of particles on the thread that gathered it (see [`super::Chunk`]).
     ///
     /// # Safety
     /// `x`, `v` and `f` hold every particle any spring refers to.
@@ -222,16 +219,10 @@ impl SpringRows {
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
-        unsafe { self.force_pass(x, damped.then_some(&*v), &mut guard) };
-        let buf = &*guard;
-        let bound = self.bound();
-        let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
-            let end = r.end.min(bound).max(r.start);
-            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-            unsafe { self.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
-            f[end - r.start..].fill(Vector::ZERO);
-        };
-        super::gather_then(x, v, f, self.chunk, &self.border, gather, finish);
+        unsafe {
+            self.force_pass(x, damped.then_some(&*v), &mut guard);
+            super::gather_set_then(self, &guard, x, v, f, finish);
+        }
     }
 
     /// One more than the largest particle index a spring refers to.
@@ -267,25 +258,6 @@ impl SpringRows {
         });
     }
 
-    /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
-    /// (as `0 + sum`, the bits of adding to a zeroed force), in registers where the build has a
-    /// faster form.
-    ///
-    /// # Safety
-    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
-    #[inline(always)]
-    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
-        // SAFETY: as the caller guarantees.
-        unsafe {
-            #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-            if std::arch::is_x86_feature_detected!("avx") {
-                self.gather_avx(p0, p1, buf, out, set);
-                return;
-            }
-            self.gather(p0, p1, buf, out, set);
-        }
-    }
-
     /// Particle `p`'s row (the slots it adds) and the springs where it is the upper end (the
     /// slots it subtracts).
     ///
@@ -305,7 +277,7 @@ impl SpringRows {
     }
 
     /// Particles `p0..p1` add their rows' slots and subtract their upper slots, into
-    /// `out[p − p0]` as [`Self::gather_chunk`] says.
+    /// `out[p − p0]` as [`super::Gather::gather_chunk`] says.
     ///
     /// # Safety
     /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
@@ -462,6 +434,36 @@ impl SpringRows {
             }
         }
         s
+    }
+}
+
+impl super::Gather for SpringRows {
+    type Slot = Slot;
+
+    fn bound(&self) -> usize {
+        SpringRows::bound(self)
+    }
+
+    fn chunk(&self) -> usize {
+        self.chunk
+    }
+
+    fn border(&self) -> &ChunkLists {
+        &self.border
+    }
+
+    /// In registers where the build has a faster form.
+    #[inline(always)]
+    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+        // SAFETY: as the caller guarantees.
+        unsafe {
+            #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+            if std::arch::is_x86_feature_detected!("avx") {
+                self.gather_avx(p0, p1, buf, out, set);
+                return;
+            }
+            self.gather(p0, p1, buf, out, set);
+        }
     }
 }
 

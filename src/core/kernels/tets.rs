@@ -20,7 +20,7 @@
 //!
 //! [`Tets::accumulate_f64`]: crate::core::fem::Tets::accumulate_f64
 
-use super::{ChunkLists, SharedMut, for_each_chunk, for_each_range};
+use super::{ChunkLists, SharedMut, for_each_chunk};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
@@ -206,18 +206,15 @@ impl TetForces {
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
-        unsafe { self.force_pass(x, &mut guard) };
-        let buf = &*guard;
-        let fp = SharedMut(f.as_mut_ptr());
-        for_each_range(self.bound(), self.chunk, |r| {
-            // SAFETY: particles below the bound; each chunk writes its own particles only.
-            unsafe { self.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
-        });
+        unsafe {
+            self.force_pass(x, &mut guard);
+            super::gather_add(self, &guard, f);
+        }
     }
 
     /// Sets `f` to the elastic forces, as if it were zeroed first and
     /// [`Self::accumulate`]d into (the same bits), then runs `finish` on each chunk of
-    /// particles on the thread that gathered it ([`super::gather_then`]).
+    /// particles on the thread that gathered it (see [`super::Chunk`]).
     ///
     /// # Safety
     /// `x`, `v` and `f` hold every particle any element refers to.
@@ -230,16 +227,10 @@ impl TetForces {
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
-        unsafe { self.force_pass(x, &mut guard) };
-        let buf = &*guard;
-        let bound = self.bound();
-        let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
-            let end = r.end.min(bound).max(r.start);
-            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-            unsafe { self.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
-            f[end - r.start..].fill(Vector::ZERO);
-        };
-        super::gather_then(x, v, f, self.chunk, &self.border, gather, finish);
+        unsafe {
+            self.force_pass(x, &mut guard);
+            super::gather_set_then(self, &guard, x, v, f, finish);
+        }
     }
 
     /// The force pass: every element's forces on its four particles into its slots of `buf`.
@@ -281,12 +272,23 @@ impl TetForces {
             }
         });
     }
+}
 
-    /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
-    /// (as `0 + sum`, the bits of adding to a zeroed force).
-    ///
-    /// # Safety
-    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
+impl super::Gather for TetForces {
+    type Slot = Vector;
+
+    fn bound(&self) -> usize {
+        TetForces::bound(self)
+    }
+
+    fn chunk(&self) -> usize {
+        self.chunk
+    }
+
+    fn border(&self) -> &ChunkLists {
+        &self.border
+    }
+
     #[inline(always)]
     unsafe fn gather_chunk(
         &self,
