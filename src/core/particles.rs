@@ -623,7 +623,9 @@ impl OdeSystem<ParticleState> for ParticleModel {
     /// forces, then one pass in which each chunk of particles sums its forces, adds the rest,
     /// is swept and checked for finiteness (see [`Self::stepped_state_is_finite`]) — where
     /// clearing, gathering, sweeping and checking were four passes, each handed to the team.
-    /// The same operations in the same order: the same bits.
+    /// That pass sweeps the runs between pinned particles and leaves the pinned ones as they
+    /// are (their derivative is zero); prescribed ones are redone as above. The same
+    /// operations in the same order: the same bits.
     fn symplectic_euler(
         &self,
         t: Scalar,
