@@ -373,9 +373,9 @@ impl OdeState for ParticleState {
         6 * self.x.len()
     }
     fn is_finite(&self) -> bool {
-        // In the spring gather's particle chunks, on the team this runs in (if any): each
-        // thread reads the particles it swept, where one thread reading them all would pull
-        // every other thread's lines across.
+        // In chunks of the spring kernel's largest size, on the team this runs in (if any):
+        // each thread reads mostly the particles it swept, where one thread reading them all
+        // would pull every other thread's lines across.
         use crate::core::kernels::{for_each_range, springs::CHUNK_PARTICLES};
         use std::sync::atomic::{AtomicBool, Ordering};
         let n = self.x.len();

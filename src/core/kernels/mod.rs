@@ -121,8 +121,8 @@ pub(crate) fn for_each_range(
     });
 }
 
-/// One chunk of a fused particle pass (a force kernel's gather and what follows it): its particles' positions, velocities
-/// and the forces the kernel has just set for them.
+/// One chunk of a fused particle pass (a force kernel's gather and what follows it): its
+/// particles' positions, velocities and the forces the kernel has just set for them.
 pub struct Chunk<'a> {
     /// The particles' indices.
     pub range: std::ops::Range<usize>,
@@ -140,16 +140,15 @@ pub type Finish<'a> = &'a (dyn Fn(Chunk<'_>) + Sync);
 
 /// The particles per chunk of a body's passes: at most `most`, at least two chunks when the
 /// body has `most` particles or more (so that it still shares its work), and as even as that
-/// allows, so that no chunk is a sliver that leaves a thread short. It
-/// depends on the body alone, never on the thread count.
+/// allows, so that no chunk is a sliver that leaves a thread short. It depends on the body
+/// alone, never on the thread count.
 pub(crate) fn chunk_size(n: usize, most: usize) -> usize {
     let chunks = n.div_ceil(most).max(if n >= most { 2 } else { 1 });
     n.div_ceil(chunks).max(1)
 }
 
 /// A list of indices for each chunk of a pass: `items[start[c]..start[c + 1]]` for chunk `c`
-/// (the particles of a chunk that another chunk's elements read, for [`gather_then`]; the
-/// springs of a chunk whose forces another chunk gathers).
+/// (the particles of a chunk that another chunk's elements read, for [`gather_set_then`]).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ChunkLists {
     start: Vec<u32>,
@@ -248,10 +247,25 @@ pub(crate) unsafe fn gather_add<K: Gather>(kernel: &K, buf: &[K::Slot], f: &mut 
 }
 
 /// Sets `f` to every particle's gathered force (zero past the kernel's particles), then runs
-/// `finish` on each chunk, in one pass ([`gather_then`]).
+/// `finish` on each chunk on the same thread, in one pass over the kernel's chunks (shared
+/// with the team as [`for_each_range`] shares them). One pass where three (clearing the
+/// forces, gathering, sweeping) each handed every particle to the team: each hand-over costs a
+/// few microseconds on a two-core machine, and a thread sweeps the forces it has just summed
+/// while they are in its cache.
+///
+/// Before it gathers, a chunk claims the cache lines of its border particles' positions and
+/// velocities ([`claim_lines`], [`Gather::border`]): those the force pass read from another
+/// chunk, and so perhaps from another core. Claimed after the gather, by the sweep's stores,
+/// they stalled the sweep: on two threads the 64² cloth's first chunk of the second share
+/// swept in 4.4 µs where the others took 1.7. Claimed first, the invalidations proceed while
+/// the chunk gathers, and its sweep took 1.8 µs (a write prefetch, `PREFETCHW`, left it at
+/// 3.8).
 ///
 /// # Safety
 /// `buf` is the kernel's force pass's.
+///
+/// # Panics
+/// If `x`, `v` and `f` differ in length.
 pub(crate) unsafe fn gather_set_then<K: Gather>(
     kernel: &K,
     buf: &[K::Slot],
@@ -260,47 +274,12 @@ pub(crate) unsafe fn gather_set_then<K: Gather>(
     f: &mut [Vector],
     finish: Finish<'_>,
 ) {
-    let bound = kernel.bound();
-    let gather = |r: std::ops::Range<usize>, f: &mut [Vector]| {
-        let end = r.end.min(bound).max(r.start);
-        // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
-        f[end - r.start..].fill(Vector::ZERO);
-    };
-    gather_then(x, v, f, kernel.chunk(), kernel.border(), gather, finish);
-}
-
-/// A force kernel's particle pass fused with what follows it: for every chunk `r` of `chunk`
-/// particles covering all of `f`, `gather(r, f[r])` sets the chunk's forces, then
-/// `finish` runs on the chunk, on the same thread (shared with the team as
-/// [`for_each_range`] shares chunks). One pass where three (clearing the forces, gathering,
-/// sweeping) each handed every particle to the team: each hand-over costs a few microseconds
-/// on a two-core machine, and a thread sweeps the forces it has just summed while they are in
-/// its cache.
-///
-/// Before it gathers, a chunk claims the cache lines of its `border` particles' positions
-/// and velocities ([`claim_lines`]): those the force pass read from another chunk, and so
-/// perhaps from another core. Claimed after the gather, by the sweep's stores, they stalled
-/// the sweep: on two threads the 64² cloth's first chunk of the second share swept in 4.4 µs
-/// where the others took 1.7. Claimed first, the invalidations proceed while the chunk
-/// gathers, and its sweep took 1.8 µs (a write prefetch, `PREFETCHW`, left it at 3.8).
-///
-/// # Panics
-/// If `x`, `v` and `f` differ in length.
-fn gather_then(
-    x: &mut [Vector],
-    v: &mut [Vector],
-    f: &mut [Vector],
-    chunk: usize,
-    border: &ChunkLists,
-    gather: impl Fn(std::ops::Range<usize>, &mut [Vector]) + Sync,
-    finish: Finish<'_>,
-) {
     let n = f.len();
     assert!(
         x.len() == n && v.len() == n,
         "state and force arrays differ in length"
     );
+    let (bound, chunk) = (kernel.bound(), kernel.chunk());
     let (xp, vp, fp) = (
         SharedMut(x.as_mut_ptr()),
         SharedMut(v.as_mut_ptr()),
@@ -316,10 +295,13 @@ fn gather_then(
                 fp.slice(r.clone()),
             )
         };
-        let mine = border.of(r.start / chunk);
+        let mine = kernel.border().of(r.start / chunk);
         claim_lines(x, mine, r.start);
         claim_lines(v, mine, r.start);
-        gather(r.clone(), f);
+        let end = r.end.min(bound).max(r.start);
+        // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+        f[end - r.start..].fill(Vector::ZERO);
         finish(Chunk { range: r, x, v, f });
     });
 }
