@@ -237,6 +237,40 @@ fn tet_energy_equals_the_f64_reference_to_round_off() {
     }
 }
 
+/// The springs' energy from the fast kernel (each spring's in the build's precision, summed in
+/// f64 by chunk) against the same sum in f64 from f64 positions. A spring's term `½ k e²` with
+/// `e = l − L` carries the error of `l` and of the subtraction, about `(l + L)·EPS` in `e`, so
+/// `k |e| (l + L)·EPS` in the term, plus a few roundings of the term itself: the bound is four
+/// times that, summed. Networks of 3000 particles (three chunks) and 300 (one), with
+/// zero-length and self springs.
+#[test]
+fn spring_energy_equals_the_f64_sum_to_round_off() {
+    for (seed, n, m) in [(11, 3000, 20_000), (12, 300, 2000)] {
+        let (s, x, _) = network(seed, n, m, false);
+        let (mut exact, mut bound) = (0.0f64, 0.0f64);
+        // A spring from a particle to itself exerts nothing and stores nothing the motion can
+        // change: the kernel leaves it out (the reference `energy` counts its constant ½ k L²).
+        for sp in s.as_slice().iter().filter(|sp| sp.i != sp.j) {
+            let (xi, xj) = (x[sp.i as usize].to_f64(), x[sp.j as usize].to_f64());
+            let l = DVec3::from_array(xi).distance(DVec3::from_array(xj));
+            let (k, rest) = (sp.k as f64, sp.rest as f64);
+            let e = l - rest;
+            exact += 0.5 * k * e * e;
+            bound += 4.0 * EPS as f64 * (k * e.abs() * (l + rest) + 0.5 * k * e * e);
+        }
+        let fast = s.energy_fast(&x);
+        println!(
+            "{n} particles: fast {fast:.9e} J, f64 {exact:.9e} J, |difference| {:.2e} (bound {bound:.2e})",
+            (fast - exact).abs()
+        );
+        assert!((fast - exact).abs() <= bound, "{fast} against {exact}");
+        assert!(
+            bound < 1e-3 * exact,
+            "the bound must be round-off, not the energy"
+        );
+    }
+}
+
 #[cfg(feature = "parallel")]
 #[test]
 fn kernels_give_the_same_bits_on_one_and_two_threads() {
@@ -250,17 +284,20 @@ fn kernels_give_the_same_bits_on_one_and_two_threads() {
             s.accumulate(&x, &v, &mut f);
             let mut g = vec![Vector::ZERO; xt.len()];
             tets.accumulate(&xt, &mut g);
-            (f, g)
+            // The divergence guard's sums, by chunk on the team.
+            let e = (s.energy_fast(&x).to_bits(), tets.energy_fast(&xt).to_bits());
+            (f, g, e)
         })
     };
     let bits = |a: &[Vector]| a.iter().map(|v| v.to_f64()).collect::<Vec<_>>();
-    let (f1, g1) = run(1);
+    let (f1, g1, e1) = run(1);
     // Two threads, and three on the machine's two cores (helpers descheduled mid-pass, their
     // shares taken by the others).
     for threads in [2, 3] {
-        let (f2, g2) = run(threads);
+        let (f2, g2, e2) = run(threads);
         assert_eq!(bits(&f1), bits(&f2), "{threads} threads");
         assert_eq!(bits(&g1), bits(&g2), "{threads} threads");
+        assert_eq!(e1, e2, "{threads} threads");
     }
 }
 

@@ -289,6 +289,21 @@ impl Springs {
         }
     }
 
+    /// The elastic energy from the fast kernel's layout, summed in f64 by chunk on the team
+    /// (the same bits on any number of threads): [`Springs::energy`] to round-off. The
+    /// divergence guard's check; energy reports use [`Springs::energy`].
+    ///
+    /// # Panics
+    /// If a spring refers past the end of `x`.
+    pub fn energy_fast(&self, x: &[Vector]) -> f64 {
+        if self.springs.is_empty() {
+            return 0.0;
+        }
+        self.check_bound(x.len());
+        // SAFETY: index bound checked just above.
+        unsafe { self.rows().energy(x) }
+    }
+
     /// Elastic energy `Σ ½ k (l − L)²`.
     pub fn energy(&self, x: &[Vector]) -> Scalar {
         self.springs

@@ -121,6 +121,27 @@ pub(crate) fn for_each_range(
     });
 }
 
+/// `Σ part(c)` over the chunks `0..chunks`, on the team as [`for_each_chunk`] shares them: each
+/// chunk's part goes to its entry of `partials` (kept by the kernel, so that the sum allocates
+/// nothing once it has as many entries as chunks), and the parts are added in chunk order, so
+/// the sum has the same bits on any number of threads.
+pub(crate) fn sum_chunks(
+    partials: &std::sync::Mutex<Vec<f64>>,
+    chunks: usize,
+    part: impl Fn(usize) -> f64 + Sync + Send,
+) -> f64 {
+    let mut partials = partials.lock().unwrap_or_else(|e| e.into_inner());
+    if partials.len() < chunks {
+        partials.resize(chunks, 0.0);
+    }
+    let out = SharedMut(partials.as_mut_ptr());
+    for_each_chunk(chunks, |c| {
+        // SAFETY: `c < chunks ≤` the entries; each chunk writes its own.
+        unsafe { *out.ptr().add(c) = part(c) }
+    });
+    partials[..chunks].iter().sum()
+}
+
 /// One chunk of a fused particle pass (a force kernel's gather and what follows it): its
 /// particles' positions, velocities and the forces the kernel has just set for them.
 pub struct Chunk<'a> {

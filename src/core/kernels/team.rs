@@ -13,12 +13,14 @@
 //!
 //! Which thread runs a chunk never changes what it computes: chunks write disjoint memory and
 //! every sum is ordered by the chunking alone (see [`super`]), so the bits are those of one
-//! thread. A pass allocates nothing: its description lives on the caller's stack for as long
-//! as the caller waits for it.
+//! thread. A pass allocates nothing: its description (the job, a pointer to the caller's
+//! closure, and the number of chunks) is written into the team's shared state, and a helper
+//! calls the job only for a chunk it has claimed, which the caller waits for.
 
 use std::cell::Cell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
-use std::sync::atomic::{AtomicBool, AtomicPtr, AtomicUsize, Ordering::SeqCst};
+use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed, Release, SeqCst};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, fence};
 use std::sync::{Arc, Mutex, OnceLock, TryLockError};
 use std::thread::{self, JoinHandle, Thread};
 use std::time::{Duration, Instant};
@@ -33,16 +35,6 @@ pub const SPIN: Duration = Duration::from_micros(300);
 /// parked one takes tens of microseconds to wake.
 pub const GRACE: Duration = Duration::from_micros(5);
 
-/// One parallel pass: `f(c)` for every `c < chunks`.
-struct Pass<'a> {
-    f: &'a (dyn Fn(usize) + Sync),
-    chunks: usize,
-    /// Chunks finished.
-    done: AtomicUsize,
-    /// A chunk panicked.
-    panicked: AtomicBool,
-}
-
 /// The chunks thread `t` of `threads` runs first: an even share, in order, so that a thread
 /// takes the same part of every pass (the gather's particles are then mostly those whose
 /// springs it evaluated, their slots still in its own cache).
@@ -50,88 +42,210 @@ fn share_of(t: usize, threads: usize, chunks: usize) -> std::ops::Range<usize> {
     t * chunks / threads..(t + 1) * chunks / threads
 }
 
+/// Bits of a share's claim word, and of a thread's done word, that count chunks (a pass of
+/// more chunks runs on its caller alone); the 48 bits above hold the pass's number, modulo
+/// 2^48, compared within a window of 2^47 passes (four years at a pass a microsecond).
+const COUNT_BITS: u32 = 16;
+const COUNT_MASK: u64 = (1 << COUNT_BITS) - 1;
+const TAG_MASK: u64 = u64::MAX >> COUNT_BITS;
+
+/// How the pass number `tag` (of a claim or done word) stands to pass `e`, modulo 2^48.
+fn order(tag: u64, e: u64) -> std::cmp::Ordering {
+    let d = tag.wrapping_sub(e) & TAG_MASK;
+    if d == 0 {
+        std::cmp::Ordering::Equal
+    } else if d <= TAG_MASK / 2 {
+        std::cmp::Ordering::Greater
+    } else {
+        std::cmp::Ordering::Less
+    }
+}
+
+/// An atomic on a cache line of its own (two lines: the adjacent-line prefetcher pairs them),
+/// so that what one thread writes every chunk never shares a line with what another reads.
+#[repr(align(128))]
+#[derive(Default)]
+struct Line(AtomicU64);
+
 /// What the caller and the helpers share.
+///
+/// A pass costs as few transfers of cache lines between cores as it can (each is about
+/// 0.1–0.2 µs on a virtual machine's cores): the caller publishes the pass on one line the
+/// helpers read; each thread claims its share's chunks on a line of its own; each thread
+/// counts the chunks it finished on a line of its own, which the caller reads at the end. No
+/// read-modify-write touches a line another thread is using while a pass runs, and neither
+/// side waits for the other before it starts its chunks. (With one counter of chunks done
+/// and one of helpers inside the pass, as before, a pass of nothing took 1.05–1.19 µs on the
+/// project's machine with two threads; see `docs/BENCHMARKS.md`.)
 struct Shared {
-    /// The pass in progress, or null.
-    pass: AtomicPtr<Pass<'static>>,
-    /// Bumped when a pass is published.
-    epoch: AtomicUsize,
-    /// Helpers looking at the pass (the caller waits for none before its pass goes away).
-    active: AtomicUsize,
+    /// `2e` once pass `e`'s description below is written; odd while it is being written (a
+    /// sequence lock: a helper reads the description, then this again, and uses it only if
+    /// nothing changed).
+    seq: AtomicU64,
+    /// The pass's job, `*const (dyn Fn(usize) + Sync)` as two words: valid while pass
+    /// `seq / 2` runs, which a helper knows by claiming one of its chunks.
+    job: [AtomicUsize; 2],
+    /// The pass's number of chunks.
+    chunks: AtomicUsize,
     /// Helpers parked, or about to.
     parked: AtomicUsize,
     stop: AtomicBool,
     /// The helpers, to wake them.
     helpers: OnceLock<Vec<Thread>>,
-    /// For each thread (the caller first), the next chunk of its share to claim.
-    next: Box<[AtomicUsize]>,
-}
-
-/// Spins on `done` with a pause hint, yielding the core after a while (when the machine has
-/// more runnable threads than cores, the thread waited for may need it).
-fn spin_until(mut done: impl FnMut() -> bool) {
-    let mut spins = 0u32;
-    while !done() {
-        if spins < 256 {
-            std::hint::spin_loop();
-            spins += 1;
-        } else {
-            thread::yield_now();
-        }
-    }
+    /// For each thread's share (the caller's first, which only the caller runs): the pass's
+    /// number and the next chunk to claim. A chunk is claimed by a compare-exchange of the
+    /// share's thread, or of a thread that takes over a share not begun within [`GRACE`].
+    claim: Box<[Line]>,
+    /// For each helper (index 0 unused): the pass's number and the chunks it has finished in
+    /// that pass. The pass is over when these and the caller's own count add up to its
+    /// chunks; what the chunks wrote is then visible to the caller (release and acquire).
+    done: Box<[Line]>,
+    /// A chunk panicked in the pass in progress.
+    panicked: AtomicBool,
 }
 
 impl Shared {
+    fn threads(&self) -> usize {
+        self.claim.len()
+    }
+
+    /// Claims the next chunk of share `t` in pass `e`, if any is left: the caller of a pass
+    /// `e` is still waiting for the chunk claimed, so its job stays valid until it is done.
+    fn claim(&self, t: usize, e: u64, share: &std::ops::Range<usize>) -> Option<usize> {
+        let word = &self.claim[t].0;
+        let mut v = word.load(Acquire);
+        loop {
+            let next = match order(v >> COUNT_BITS, e) {
+                std::cmp::Ordering::Equal => (v & COUNT_MASK) as usize,
+                // Not begun in this pass.
+                std::cmp::Ordering::Less => share.start,
+                // A later pass: this one is over.
+                std::cmp::Ordering::Greater => return None,
+            };
+            if next >= share.end {
+                return None;
+            }
+            match word.compare_exchange_weak(
+                v,
+                e << COUNT_BITS | (next as u64 + 1),
+                AcqRel,
+                Acquire,
+            ) {
+                Ok(_) => return Some(next),
+                Err(w) => v = w,
+            }
+        }
+    }
+
+    /// Whether share `t`'s thread (or another) has begun it in pass `e`.
+    fn begun(&self, t: usize, e: u64) -> bool {
+        order(self.claim[t].0.load(Acquire) >> COUNT_BITS, e) != std::cmp::Ordering::Less
+    }
+
+    /// Runs the chunks of share `t` of pass `e` that nobody else claims; returns how many.
+    fn run_share(&self, t: usize, e: u64, chunks: usize, f: &(dyn Fn(usize) + Sync)) -> u64 {
+        let share = share_of(t, self.threads(), chunks);
+        let mut ran = 0;
+        while let Some(c) = self.claim(t, e, &share) {
+            if catch_unwind(AssertUnwindSafe(|| f(c))).is_err() {
+                self.panicked.store(true, Release);
+            }
+            ran += 1;
+        }
+        ran
+    }
+
     /// Runs `f` on every chunk, sharing them with the helpers; returns when all are done.
     fn run(&self, chunks: usize, f: &(dyn Fn(usize) + Sync)) {
-        let pass = Pass {
-            f,
-            chunks,
-            done: AtomicUsize::new(0),
-            panicked: AtomicBool::new(false),
-        };
-        let threads = self.next.len();
-        for (t, next) in self.next.iter().enumerate() {
-            next.store(share_of(t, threads, chunks).start, SeqCst);
-        }
-        // SAFETY (of the helpers' reads through this pointer): it is cleared below, and this
-        // function returns only once no helper is between reading it and being done with it.
-        let ptr = &pass as *const Pass<'_> as *mut Pass<'static>;
-        self.pass.store(ptr, SeqCst);
-        self.epoch.fetch_add(1, SeqCst);
-        if self.parked.load(SeqCst) > 0
+        let threads = self.threads();
+        let e = self.seq.load(Relaxed) / 2 + 1;
+        // SAFETY (of the helpers' use of the job): a helper calls it only for a chunk of pass
+        // `e` it has claimed, and this function returns only once every chunk is done.
+        let job: [usize; 2] =
+            unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), [usize; 2]>(f) };
+        self.seq.store(2 * e - 1, Relaxed);
+        fence(Release);
+        self.job[0].store(job[0], Relaxed);
+        self.job[1].store(job[1], Relaxed);
+        self.chunks.store(chunks, Relaxed);
+        self.seq.store(2 * e, Release);
+        // A helper that parks while this is published may miss the wake-up: its share is
+        // taken over after `GRACE`, and the next pass wakes it.
+        if self.parked.load(Relaxed) > 0
             && let Some(helpers) = self.helpers.get()
         {
             for h in helpers {
                 h.unpark();
             }
         }
-        self.work(&pass, 0);
-        spin_until(|| pass.done.load(SeqCst) >= chunks);
-        self.pass.store(std::ptr::null_mut(), SeqCst);
-        spin_until(|| self.active.load(SeqCst) == 0);
+        // The caller's own share: only it claims there.
+        let mut mine = 0;
+        for c in share_of(0, threads, chunks) {
+            if catch_unwind(AssertUnwindSafe(|| f(c))).is_err() {
+                self.panicked.store(true, Release);
+            }
+            mine += 1;
+        }
+        let finished = |t: usize| {
+            let d = self.done[t].0.load(Acquire);
+            if order(d >> COUNT_BITS, e) == std::cmp::Ordering::Equal {
+                d & COUNT_MASK
+            } else {
+                0
+            }
+        };
+        let since = Instant::now();
+        let mut spins = 0u32;
+        let mut looked = false;
+        loop {
+            let total: u64 = mine + (1..threads).map(finished).sum::<u64>();
+            if total as usize >= chunks {
+                break;
+            }
+            // A share not begun within `GRACE` (its helper parked, descheduled or gone) is
+            // taken over; a share begun is left to its thread (see `work`). Its claim line is
+            // read only then: read while its thread claims there, it would stall that thread.
+            if !looked && spins >= 64 && since.elapsed() >= GRACE {
+                looked = true;
+                for t in 1..threads {
+                    if finished(t) == 0 && !self.begun(t, e) {
+                        mine += self.run_share(t, e, chunks, f);
+                    }
+                }
+            }
+            spins = spins.saturating_add(1);
+            if spins < 4096 {
+                std::hint::spin_loop();
+            } else {
+                thread::yield_now();
+            }
+        }
         assert!(
-            !pass.panicked.load(SeqCst),
+            !self.panicked.swap(false, Acquire),
             "a soft-body force kernel panicked"
         );
     }
 
-    /// Thread `me` runs the chunks of its share, then those of any share whose thread has
-    /// not begun it within [`GRACE`] (a helper parked, descheduled or gone). A share its thread
-    /// has begun is left to it: taking chunks of a running share saves a few microseconds and
-    /// costs more, since the chunk's springs and slots, and the particles it writes, are in the
-    /// other core's cache (taking about one chunk a step that way, two threads were 7 % slower
-    /// on the bench cloth). A chunk that panics is counted done and noted, so that the pass
-    /// ends and its caller panics after it.
-    fn work(&self, pass: &Pass<'_>, me: usize) {
-        let threads = self.next.len();
-        for k in 0..threads {
-            let t = (me + k) % threads;
-            let share = share_of(t, threads, pass.chunks);
+    /// Helper `me` runs the chunks of its share of pass `e`, then those of any other helper's
+    /// share not begun within [`GRACE`] (a helper parked, descheduled or gone). A share its
+    /// thread has begun is left to it: taking chunks of a running share saves a few
+    /// microseconds and costs more, since the chunk's springs and slots, and the particles it
+    /// writes, are in the other core's cache (taking about one chunk a step that way, two
+    /// threads were 7 % slower on the bench cloth). A chunk that panics is counted done and
+    /// noted, so that the pass ends and its caller panics after it.
+    ///
+    /// `f` is called only for a chunk claimed in pass `e`, which keeps it valid (see `run`).
+    fn work(&self, me: usize, e: u64, chunks: usize, f: *const (dyn Fn(usize) + Sync)) {
+        let threads = self.threads();
+        let mut ran = 0u64;
+        let count = |ran: u64| self.done[me].0.store(e << COUNT_BITS | ran, Release);
+        for k in 0..threads - 1 {
+            let t = 1 + (me - 1 + k) % (threads - 1);
+            let share = share_of(t, threads, chunks);
             if k > 0 && !share.is_empty() {
                 let since = Instant::now();
                 let begun = loop {
-                    if self.next[t].load(SeqCst) > share.start {
+                    if self.begun(t, e) {
                         break true;
                     }
                     if since.elapsed() >= GRACE {
@@ -143,37 +257,41 @@ impl Shared {
                     continue;
                 }
             }
-            loop {
-                let c = self.next[t].fetch_add(1, SeqCst);
-                if c >= share.end {
-                    break;
+            while let Some(c) = self.claim(t, e, &share) {
+                // SAFETY: chunk `c` of pass `e` is claimed and not yet counted done, so pass
+                // `e`'s caller is still waiting and its job alive.
+                if catch_unwind(AssertUnwindSafe(|| unsafe { (*f)(c) })).is_err() {
+                    self.panicked.store(true, Release);
                 }
-                if catch_unwind(AssertUnwindSafe(|| (pass.f)(c))).is_err() {
-                    pass.panicked.store(true, SeqCst);
-                }
-                pass.done.fetch_add(1, SeqCst);
+                ran += 1;
+                count(ran);
             }
         }
     }
 
     /// A helper's life: passes as they come, spinning between them, parked when idle.
     fn help(&self, me: usize) {
-        let mut seen = self.epoch.load(SeqCst);
+        let mut seen = self.seq.load(Acquire) / 2;
         let mut idle_since = Instant::now();
         let mut spins = 0u32;
-        while !self.stop.load(SeqCst) {
-            let epoch = self.epoch.load(SeqCst);
-            if epoch != seen {
-                seen = epoch;
-                self.active.fetch_add(1, SeqCst);
-                let p = self.pass.load(SeqCst);
-                if !p.is_null() {
-                    // SAFETY: read after `active` counted this helper; the caller clears the
-                    // pointer before it waits for `active` to fall to zero, so a pointer read
-                    // now stays valid until this helper is done and uncounted.
-                    self.work(unsafe { &*p }, me);
+        while !self.stop.load(Relaxed) {
+            let s = self.seq.load(Acquire);
+            if s.is_multiple_of(2) && s / 2 != seen {
+                let job = [self.job[0].load(Relaxed), self.job[1].load(Relaxed)];
+                let chunks = self.chunks.load(Relaxed);
+                fence(Acquire);
+                if self.seq.load(Relaxed) != s {
+                    // Rewritten meanwhile: that pass is over, the next one is coming.
+                    continue;
                 }
-                self.active.fetch_sub(1, SeqCst);
+                seen = s / 2;
+                // SAFETY: the two words of the job pointer the caller wrote for pass `seen`
+                // (checked just above), back as they were; `work` calls it only while that
+                // pass runs.
+                let f = unsafe {
+                    std::mem::transmute::<[usize; 2], *const (dyn Fn(usize) + Sync)>(job)
+                };
+                self.work(me, seen, chunks, f);
                 idle_since = Instant::now();
                 spins = 0;
                 continue;
@@ -190,12 +308,11 @@ impl Shared {
                 thread::yield_now();
                 continue;
             }
-            // Park, unless a pass came meanwhile: the caller bumps the epoch before it reads
-            // `parked`, this helper raises `parked` before it reads the epoch, so one of the
-            // two sees the other (and an unpark that comes first makes the park return).
+            // Park, unless a pass came meanwhile (one that comes while this helper parks may
+            // go without it: see `run`).
             self.parked.fetch_add(1, SeqCst);
-            if self.epoch.load(SeqCst) == seen && !self.stop.load(SeqCst) {
-                thread::park();
+            if self.seq.load(SeqCst) / 2 == seen && !self.stop.load(SeqCst) {
+                thread::park_timeout(SPIN * 100);
             }
             self.parked.fetch_sub(1, SeqCst);
             idle_since = Instant::now();
@@ -236,13 +353,15 @@ impl Team {
             threads
         };
         let shared = Arc::new(Shared {
-            pass: AtomicPtr::new(std::ptr::null_mut()),
-            epoch: AtomicUsize::new(0),
-            active: AtomicUsize::new(0),
+            seq: AtomicU64::new(0),
+            job: [AtomicUsize::new(0), AtomicUsize::new(0)],
+            chunks: AtomicUsize::new(0),
             parked: AtomicUsize::new(0),
             stop: AtomicBool::new(false),
             helpers: OnceLock::new(),
-            next: (0..threads).map(|_| AtomicUsize::new(0)).collect(),
+            claim: (0..threads).map(|_| Line::default()).collect(),
+            done: (0..threads).map(|_| Line::default()).collect(),
+            panicked: AtomicBool::new(false),
         });
         let mut workers = Vec::new();
         for i in 1..threads {
@@ -311,10 +430,11 @@ impl std::fmt::Debug for Team {
 
 /// Runs `job(c)` for every `c < chunks` on the team this thread runs in, if any (see
 /// [`Team::run`]); one after another otherwise. Returns false (having run nothing) when there
-/// is no team to share them with.
+/// is no team to share them with, or more than 65,535 chunks (a body of 67 million particles
+/// in the spring kernel's chunks).
 pub(crate) fn share(chunks: usize, job: &(dyn Fn(usize) + Sync)) -> bool {
     let shared = CURRENT.with(|c| c.get());
-    if shared.is_null() {
+    if shared.is_null() || chunks as u64 > COUNT_MASK {
         return false;
     }
     // Inside the pass this thread runs chunks too; a kernel a chunk calls runs on this thread.
@@ -339,7 +459,6 @@ pub(crate) fn current_threads() -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::AtomicU64;
 
     /// Every chunk runs exactly once per pass, whoever runs it, over many passes with and
     /// without pauses long enough for the helpers to park.
@@ -366,6 +485,27 @@ mod tests {
         });
         assert_eq!(current_threads(), 1);
         assert!(!share(4, &|_| {}));
+    }
+
+    /// Pass numbers compare within their window across the wrap of their 48 bits, and a pass
+    /// of more chunks than a claim word counts runs on its caller alone.
+    #[test]
+    fn pass_numbers_wrap_and_huge_passes_run_alone() {
+        use std::cmp::Ordering::*;
+        let top = TAG_MASK;
+        assert_eq!(order(5, 5), Equal);
+        assert_eq!(order(4, 5), Less);
+        assert_eq!(order(6, 5), Greater);
+        // Across the wrap: 2^48 − 1 is the pass before 0 (and the tag of pass 2^48 is 0).
+        assert_eq!(order(top, 0), Less);
+        assert_eq!(order(0, top), Greater);
+        assert_eq!(order(((1u64 << 48) + 3) & top, 3), Equal);
+        assert_eq!(order(0, top / 2), Less);
+        let team = Team::new(2);
+        team.run(|| {
+            assert!(!share(COUNT_MASK as usize + 1, &|_| {}));
+            assert!(share(COUNT_MASK as usize, &|_| {}));
+        });
     }
 
     /// A pass from inside a chunk runs on its own thread; a second caller runs alone.

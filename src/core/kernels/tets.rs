@@ -74,6 +74,8 @@ pub struct TetForces {
     element_start: Vec<u32>,
     /// For each chunk, its particles that elements of other chunks reach.
     border: ChunkLists,
+    /// Each chunk's part of a sum over the elements ([`Self::energy`]).
+    partials: Mutex<Vec<f64>>,
 }
 
 impl TetForces {
@@ -162,6 +164,7 @@ impl TetForces {
             buffer: Mutex::new(vec![Vector::ZERO; 4 * elements.len()]),
             elements,
             chunk,
+            partials: Mutex::new(vec![0.0; element_start.len() - 1]),
             element_start,
             border,
         }
@@ -172,8 +175,9 @@ impl TetForces {
         self.element_start.len() - 1
     }
 
-    /// The elastic energy `Σ V ψ(F)`, each element's in the build's precision with
-    /// [`inv_cbrt`], summed in f64: the reference [`Tets::energy`] to that precision's
+    /// The elastic energy `Σ V ψ(F)`: each element's in the build's precision with
+    /// [`inv_cbrt`], summed in f64 by chunk on the team, the chunks' sums in order (the same
+    /// bits on any number of threads). The reference [`Tets::energy`] to that precision's
     /// round-off, and several times faster (the divergence guard's check).
     ///
     /// [`Tets::energy`]: crate::core::fem::Tets::energy
@@ -181,17 +185,20 @@ impl TetForces {
     /// # Safety
     /// `x` holds every particle any element refers to.
     pub(crate) unsafe fn energy(&self, x: &[Vector]) -> f64 {
-        let mut sum = 0.0;
-        for e in &self.elements {
-            // SAFETY: the caller guarantees the indices.
-            let [fa, fb, fc] = unsafe { deformation(e, x) };
-            let j = fa.dot(fb.cross(fc));
-            let i1 = fa.dot(fa) + fb.dot(fb) + fc.dot(fc);
-            let r = inv_cbrt(j.max(J_MIN as Scalar));
-            let psi = e.c * (r * r * i1 - 3.0) + e.d * (j - 1.0) * (j - 1.0);
-            sum += (e.volume * psi) as f64;
-        }
-        sum
+        super::sum_chunks(&self.partials, self.chunks(), |c| {
+            let r = self.element_start[c] as usize..self.element_start[c + 1] as usize;
+            let mut sum = 0.0;
+            for e in &self.elements[r] {
+                // SAFETY: the caller guarantees the indices.
+                let [fa, fb, fc] = unsafe { deformation(e, x) };
+                let j = fa.dot(fb.cross(fc));
+                let i1 = fa.dot(fa) + fb.dot(fb) + fc.dot(fc);
+                let r = inv_cbrt(j.max(J_MIN as Scalar));
+                let psi = e.c * (r * r * i1 - 3.0) + e.d * (j - 1.0) * (j - 1.0);
+                sum += (e.volume * psi) as f64;
+            }
+            sum
+        })
     }
 
     /// One more than the largest particle index used.
@@ -698,6 +705,7 @@ impl Clone for TetForces {
             chunk: self.chunk,
             element_start: self.element_start.clone(),
             border: self.border.clone(),
+            partials: Mutex::new(vec![0.0; self.chunks()]),
         }
     }
 }
