@@ -227,6 +227,27 @@ pub(crate) fn claim_lines<T>(s: &mut [T], items: &[u32], base: usize) {
     }
 }
 
+/// Asks for the cache lines of `s[i]` for each `i` of `items` (sorted), once a line, without
+/// waiting for them: a pass asks at a chunk's start for what another core last wrote and the
+/// chunk reads only near its end, and the lines arrive while it works.
+#[inline]
+pub(crate) fn prefetch<T>(s: &[T], items: &[u32]) {
+    let mut last = usize::MAX;
+    for &i in items {
+        let Some(e) = s.get(i as usize) else { continue };
+        let line = e as *const T as usize / 64;
+        if line != last {
+            last = line;
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: a prefetch of a valid address reads nothing.
+            unsafe {
+                use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+                _mm_prefetch::<_MM_HINT_T0>(e as *const T as *const i8);
+            }
+        }
+    }
+}
+
 /// A kernel's gather: every particle sums the slots its elements' force pass wrote, in a fixed
 /// order, in chunks of particles that the force pass shares.
 pub(crate) trait Gather: Sync {
