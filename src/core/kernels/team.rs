@@ -213,6 +213,8 @@ impl Shared {
                     }
                 }
             }
+            // A helper a few microseconds behind is waited for spinning (a yield is a system
+            // call, slow in a virtual machine); one far behind, with the core yielded to it.
             spins = spins.saturating_add(1);
             if spins < 4096 {
                 std::hint::spin_loop();
@@ -308,14 +310,18 @@ impl Shared {
                 thread::yield_now();
                 continue;
             }
-            // Park, unless a pass came meanwhile (one that comes while this helper parks may
-            // go without it: see `run`).
+            // Park, unless a pass came meanwhile. A pass published as this helper parks may
+            // miss it (see `run`): that pass's share is taken over, the next pass wakes it,
+            // and a timeout bounds the sleep if no pass comes; woken with no pass, it parks
+            // again at once.
             self.parked.fetch_add(1, SeqCst);
             if self.seq.load(SeqCst) / 2 == seen && !self.stop.load(SeqCst) {
                 thread::park_timeout(SPIN * 100);
             }
             self.parked.fetch_sub(1, SeqCst);
-            idle_since = Instant::now();
+            if self.seq.load(Acquire) / 2 != seen {
+                idle_since = Instant::now();
+            }
         }
     }
 }
