@@ -74,6 +74,8 @@ pub struct TetForces {
     element_start: Vec<u32>,
     /// For each chunk, its particles that elements of other chunks reach.
     border: ChunkLists,
+    /// For each chunk, the particles of other chunks its elements reach.
+    reach: ChunkLists,
     /// Each chunk's part of a sum over the elements ([`Self::energy`]).
     partials: Mutex<Vec<f64>>,
 }
@@ -138,13 +140,14 @@ impl TetForces {
             }
         }
         let elements: Vec<Element> = order.iter().map(|&k| given[k]).collect();
-        let border = ChunkLists::new(
+        let crossing = || {
             elements
                 .iter()
                 .flat_map(|e| e.v.map(|p| (chunk_of(e), p)))
                 .filter(|&(c, p)| p as usize / chunk != c)
-                .map(|(_, p)| (p as usize / chunk, p)),
-        );
+        };
+        let border = ChunkLists::new(crossing().map(|(_, p)| (p as usize / chunk, p)));
+        let reach = ChunkLists::new(crossing());
         #[cfg(target_arch = "x86_64")]
         let lanes = elements
             .chunks_exact(lane::W)
@@ -167,6 +170,7 @@ impl TetForces {
             partials: Mutex::new(vec![0.0; element_start.len() - 1]),
             element_start,
             border,
+            reach,
         }
     }
 
@@ -249,6 +253,9 @@ impl TetForces {
         #[cfg(target_arch = "x86_64")]
         let avx = std::arch::is_x86_feature_detected!("avx");
         for_each_chunk(self.chunks(), |c| {
+            // What the chunk's elements read of other chunks, perhaps written last by another
+            // thread's sweep: asked for now, in flight together (see the springs' pass).
+            super::prefetch(x, self.reach.of(c));
             let (e0, e1) = (
                 self.element_start[c] as usize,
                 self.element_start[c + 1] as usize,
@@ -705,6 +712,7 @@ impl Clone for TetForces {
             chunk: self.chunk,
             element_start: self.element_start.clone(),
             border: self.border.clone(),
+            reach: self.reach.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
         }
     }
