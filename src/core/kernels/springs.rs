@@ -285,9 +285,10 @@ impl SpringRows {
             // velocities) another thread's sweep may have written last: asked for now, they
             // arrive while the first rows are evaluated (two threads, the same run: bench
             // cloth 31.3 → 31.0 µs a step, 32² cloth 10.8 → 10.0).
-            super::prefetch(x, self.reach.of(c.start / self.chunk));
+            let reach = self.reach.of(c.start / self.chunk);
+            super::prefetch(x, reach);
             if let Some(v) = v {
-                super::prefetch(v, self.reach.of(c.start / self.chunk));
+                super::prefetch(v, reach);
             }
             // SAFETY: indices are below the bound the caller guarantees; a chunk writes only
             // its own springs' slots.
