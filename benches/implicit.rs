@@ -5,9 +5,10 @@
 //! and the springs are stretched; the state is not reset between samples, so every sample is a
 //! step of the same ongoing simulation.
 //!
-//! `cargo bench --bench implicit` (add `--no-default-features` to skip building Bevy: the
-//! numbers are the core's either way). Target: linearly implicit Euler on 128×128 at
-//! ≤ 16.7 ms per step on one core.
+//! `cargo bench --bench implicit` (or `--no-default-features --features parallel` to skip
+//! building Bevy: the numbers are the core's either way); `THREADS=N` runs the solves on a team of `N` threads
+//! (default: all cores; `THREADS=1` for one). Target: linearly implicit Euler on 128×128 at
+//! ≤ 16.7 ms per step.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
@@ -16,6 +17,7 @@ use bevy_soft_body::core::integrate::{BackwardEuler, Integrator, LinearlyImplici
 use bevy_soft_body::core::solve::LinearSolver;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, criterion_group, criterion_main};
+use std::time::{Duration, Instant};
 
 type Boxed = Box<dyn Integrator<ParticleState, ParticleModel>>;
 
@@ -28,6 +30,21 @@ fn method(name: &str) -> Boxed {
         "newton_cholesky" => Box::new(BackwardEuler::new(chol(), 5)),
         _ => unreachable!(),
     }
+}
+
+/// Times `iters` runs of `work` on a team of `THREADS` threads (default: all cores).
+fn timed(iters: u64, mut work: impl FnMut() + Send) -> Duration {
+    let threads = std::env::var("THREADS")
+        .ok()
+        .and_then(|t| t.parse().ok())
+        .unwrap_or(0);
+    bevy_soft_body::core::kernels::with_threads(threads, || {
+        let t0 = Instant::now();
+        for _ in 0..iters {
+            work();
+        }
+        t0.elapsed()
+    })
 }
 
 fn bench(c: &mut Criterion) {
@@ -46,8 +63,10 @@ fn bench(c: &mut Criterion) {
             }
             integ.reset();
             g.bench_function(format!("{name}/{n}x{n}"), |b| {
-                b.iter(|| {
-                    t += integ.step(&model, t, h, &mut state).unwrap();
+                b.iter_custom(|iters| {
+                    timed(iters, || {
+                        t += integ.step(&model, t, h, &mut state).unwrap();
+                    })
                 })
             });
             let st = integ.stats();

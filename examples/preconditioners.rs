@@ -1,13 +1,14 @@
 //! PCG's preconditioners side by side: block-Jacobi against the default (`Preconditioner::Auto`,
 //! the aggregation multigrid from 4096 particles) on the seed cloth at 64² and 128² and, when
 //! `../shared/bench` is there, the shared bench's 64² cloth: linearly implicit Euler at PCG
-//! tolerances 1e-6 and 1e-3 and Newton backward Euler, h = 1/60, one thread. Each run takes
+//! tolerances 1e-6 and 1e-3 and Newton backward Euler, h = 1/60, on `--threads N` threads
+//! (default: all cores; the solves' passes are shared, with the same bits). Each run takes
 //! 30 warm-up steps, then five samples of six steps; prints the fastest sample and the mean
 //! (ms per step), CG iterations per step and the speed-up, as a Markdown table. No window, no
 //! keys.
 //!
 //! ```text
-//! cargo run --release --no-default-features --example preconditioners
+//! cargo run --release --no-default-features --features parallel --example preconditioners [-- --threads N]
 //! ```
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
@@ -70,6 +71,22 @@ fn time(model: &ParticleModel, start: &ParticleState, mut integ: Boxed) -> (f64,
 }
 
 fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let threads = match args.iter().position(|a| a == "--threads") {
+        Some(k) => match args.get(k + 1).and_then(|t| t.parse::<usize>().ok()) {
+            Some(t) => t,
+            None => {
+                eprintln!("--threads: not a count");
+                std::process::exit(2);
+            }
+        },
+        None => 0,
+    };
+    bevy_soft_body::core::kernels::with_threads(threads, run);
+}
+
+fn run() {
+    let threads = bevy_soft_body::core::kernels::current_threads();
     let mut cases: Vec<(String, ParticleModel, ParticleState)> = vec![];
     for n in [64, 128] {
         let p = build::ClothParams::default().resized(n, n);
@@ -88,7 +105,7 @@ fn main() {
         Err(e) => eprintln!("../shared/bench/cloth_64.json left out: {e}"),
     }
     println!(
-        "PCG preconditioners, h = 1/60, {PRECISION}, one thread; ms per step (fastest, mean of 5 × 6 steps) and CG iterations per step"
+        "PCG preconditioners, h = 1/60, {PRECISION}, {threads} thread(s); ms per step (fastest, mean of 5 × 6 steps) and CG iterations per step"
     );
     println!();
     println!("| system | particles | method | tolerance | block-Jacobi | default | speed-up |");

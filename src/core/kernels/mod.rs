@@ -130,16 +130,32 @@ pub(crate) fn sum_chunks(
     chunks: usize,
     part: impl Fn(usize) -> f64 + Sync + Send,
 ) -> f64 {
+    sums_chunks(partials, chunks, |c| [part(c)])[0]
+}
+
+/// [`sum_chunks`] of `K` sums at once (`partials` holds `K` entries a chunk).
+pub(crate) fn sums_chunks<const K: usize>(
+    partials: &std::sync::Mutex<Vec<f64>>,
+    chunks: usize,
+    part: impl Fn(usize) -> [f64; K] + Sync + Send,
+) -> [f64; K] {
     let mut partials = partials.lock().unwrap_or_else(|e| e.into_inner());
-    if partials.len() < chunks {
-        partials.resize(chunks, 0.0);
+    if partials.len() < K * chunks {
+        partials.resize(K * chunks, 0.0);
     }
     let out = SharedMut(partials.as_mut_ptr());
     for_each_chunk(chunks, |c| {
-        // SAFETY: `c < chunks ≤` the entries; each chunk writes its own.
-        unsafe { *out.ptr().add(c) = part(c) }
+        let p = part(c);
+        // SAFETY: `K c + K ≤ K chunks ≤` the entries; each chunk writes its own `K`.
+        unsafe { std::ptr::copy_nonoverlapping(p.as_ptr(), out.ptr().add(K * c), K) }
     });
-    partials[..chunks].iter().sum()
+    let mut sum = [0.0; K];
+    for p in partials[..K * chunks].chunks_exact(K) {
+        for (s, v) in sum.iter_mut().zip(p) {
+            *s += v;
+        }
+    }
+    sum
 }
 
 /// One chunk of a fused particle pass (a force kernel's gather and what follows it): its

@@ -4,12 +4,108 @@
 
 pub(crate) mod cholesky;
 pub mod multigrid;
+pub(crate) mod packed;
 
 pub use cholesky::SparseCholesky;
 pub use multigrid::Multigrid;
 
 use crate::core::forces::Springs;
+use crate::core::kernels::{self, SharedMut};
 use crate::math::{Matrix3, Scalar, Vector};
+use std::ops::Range;
+use std::sync::Mutex;
+
+/// Rows per chunk of the solvers' passes (the matrix product and the vector updates), shared
+/// with the team of threads the caller runs in (see [`kernels::with_threads`]): at most this
+/// many, cut by the system's size alone, so the results are the same bits on any number of
+/// threads.
+pub const CHUNK_ROWS: usize = 1024;
+
+/// Marks a row entry that uses its off-diagonal block at `(j, i)`: transposed, unless the
+/// block is symmetric.
+const AT_JI: u32 = 1 << 31;
+
+/// The matrix's rows: for each block row, its off-diagonal blocks and their columns, sorted
+/// by column. Each pair's block appears in both its rows, so a row's product is a sum over
+/// its own entries and every row is written by one chunk alone: no scatter, no thread
+/// writes another's rows, and the sum's order is fixed.
+#[derive(Clone, Debug, Default)]
+struct Rows {
+    start: Vec<u32>,
+    /// The block of each entry (its index in `off`, with [`AT_JI`] when this row is the
+    /// pair's `j`).
+    block: Vec<u32>,
+    col: Vec<u32>,
+}
+
+impl Rows {
+    fn new(n: usize, pairs: &[(u32, u32)]) -> Self {
+        assert!(
+            pairs.len() < AT_JI as usize && 2 * pairs.len() < u32::MAX as usize,
+            "too many off-diagonal blocks"
+        );
+        let mut start = vec![0u32; n + 1];
+        for &(i, j) in pairs {
+            start[i as usize + 1] += 1;
+            start[j as usize + 1] += 1;
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut entries = vec![(0u32, 0u32); start[n] as usize];
+        let mut fill = start.clone();
+        for (k, &(i, j)) in pairs.iter().enumerate() {
+            let k = k as u32;
+            for (row, e) in [(i, (j, k)), (j, (i, k | AT_JI))] {
+                entries[fill[row as usize] as usize] = e;
+                fill[row as usize] += 1;
+            }
+        }
+        for i in 0..n {
+            entries[start[i] as usize..start[i + 1] as usize].sort_unstable();
+        }
+        let (col, block) = entries.into_iter().unzip();
+        Self { start, block, col }
+    }
+}
+
+/// Per-chunk partial sums for the solvers' dot products (cloned empty: scratch).
+#[derive(Debug, Default)]
+pub(crate) struct Partials(pub(crate) Mutex<Vec<f64>>);
+
+impl Clone for Partials {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+/// The chunking of a system of `n` rows for the solvers' passes: `(rows per chunk, chunks)`.
+pub(crate) fn chunking(n: usize) -> (usize, usize) {
+    // Whole groups of the packed product's lanes.
+    let size = kernels::chunk_size(n, CHUNK_ROWS).next_multiple_of(packed::LANES);
+    (size, n.div_ceil(size))
+}
+
+/// Runs `job(r, c)` for each chunk `c` of rows `r` of a system of `n` rows ([`chunking`]), on
+/// the team.
+pub(crate) fn for_each_rows(n: usize, job: impl Fn(Range<usize>, usize) + Sync + Send) {
+    let (size, chunks) = chunking(n);
+    kernels::for_each_chunk(chunks, |c| job(c * size..((c + 1) * size).min(n), c));
+}
+
+/// `Σ_i part(i)` over each chunk's rows, summed per chunk and then over the chunks in order
+/// (the same bits on any number of threads), `K` sums at once.
+pub(crate) fn sum_rows<const K: usize>(
+    partials: &Partials,
+    n: usize,
+    part: impl Fn(Range<usize>) -> [Scalar; K] + Sync + Send,
+) -> [Scalar; K] {
+    let (size, chunks) = chunking(n);
+    kernels::sums_chunks(&partials.0, chunks, |c| {
+        part(c * size..((c + 1) * size).min(n)).map(|v| v as f64)
+    })
+    .map(|v| v as Scalar)
+}
 
 /// A symmetric matrix of 3×3 blocks: one diagonal block per particle and one off-diagonal block
 /// per pair `(i, j)` — each spring, then each tet edge — stored as the block at row `i`,
@@ -28,17 +124,23 @@ pub struct SpringMatrix {
     /// column-wise product, where a transposed one costs three dot products (about half of a
     /// PCG iteration's time on a cloth).
     symmetric: usize,
+    rows: Rows,
+    /// Names the structure (a number no other structure built by this process has), so that
+    /// copies made of it know when it changes.
+    structure: u64,
+}
+
+/// The next [`SpringMatrix::structure`].
+fn next_structure() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 impl SpringMatrix {
     /// A zero matrix for `n` particles with the structure of `springs`.
     pub fn new(n: usize, springs: &Springs) -> Self {
-        Self {
-            diag: vec![Matrix3::ZERO; n],
-            off: vec![Matrix3::ZERO; springs.len()],
-            pairs: springs.as_slice().iter().map(|s| (s.i, s.j)).collect(),
-            symmetric: springs.len(),
-        }
+        Self::with_pairs(n, springs.as_slice().iter().map(|s| (s.i, s.j)).collect())
+            .with_symmetric_prefix(springs.len())
     }
 
     /// A zero matrix for `n` particles with off-diagonal blocks at `pairs`.
@@ -46,8 +148,10 @@ impl SpringMatrix {
         Self {
             diag: vec![Matrix3::ZERO; n],
             off: vec![Matrix3::ZERO; pairs.len()],
+            rows: Rows::new(n, &pairs),
             pairs,
             symmetric: 0,
+            structure: next_structure(),
         }
     }
 
@@ -55,6 +159,7 @@ impl SpringMatrix {
     /// so): [`mul`](Self::mul) then skips their transpose.
     pub fn with_symmetric_prefix(mut self, k: usize) -> Self {
         self.symmetric = k.min(self.off.len());
+        self.structure = next_structure();
         self
     }
 
@@ -101,24 +206,63 @@ impl SpringMatrix {
         self.symmetric
     }
 
-    /// `y ← A x`.
+    /// `y ← A x`, by rows, in chunks of [`CHUNK_ROWS`] shared with the team the caller runs in
+    /// (the same bits on any number of threads).
+    ///
+    /// # Panics
+    /// If `x` or `y` is shorter than the matrix.
     pub fn mul(&self, x: &[Vector], y: &mut [Vector]) {
-        for ((yi, d), xi) in y.iter_mut().zip(&self.diag).zip(x) {
-            *yi = *d * *xi;
+        self.mul_map(x, y, |_, ax| ax, None);
+    }
+
+    /// `y_i ← f(i, (A x)_i)` for every row, as [`mul`](Self::mul) runs; with `dot`, returns
+    /// `Σ_i x_i · y_i` (summed per chunk, then over the chunks in order), else zero.
+    pub(crate) fn mul_map(
+        &self,
+        x: &[Vector],
+        y: &mut [Vector],
+        f: impl Fn(usize, Vector) -> Vector + Sync + Send,
+        dot: Option<&Partials>,
+    ) -> Scalar {
+        Product::Rows(self).mul_map(x, y, f, dot)
+    }
+
+    /// `(A x)_i`: the row's entries in column order, summed into two partial sums by their
+    /// place in the row (even, odd: two independent chains of additions), then the diagonal
+    /// block's product and the two sums added.
+    #[inline]
+    fn row_times(&self, i: usize, x: &[Vector]) -> Vector {
+        let rows = &self.rows;
+        let (a, b) = (rows.start[i] as usize, rows.start[i + 1] as usize);
+        let (block, col) = (&rows.block[a..b], &rows.col[a..b]);
+        let mut s = [Vector::ZERO; 2];
+        if self.symmetric == self.off.len() {
+            let off = &self.off[..];
+            let mut e = 0;
+            while e + 2 <= block.len() {
+                for q in 0..2 {
+                    let (k, c) = ((block[e + q] & !AT_JI) as usize, col[e + q] as usize);
+                    s[q] += off[k] * x[c];
+                }
+                e += 2;
+            }
+            if e < block.len() {
+                let (k, c) = ((block[e] & !AT_JI) as usize, col[e] as usize);
+                s[0] += off[k] * x[c];
+            }
+        } else {
+            let sym = self.symmetric as u32;
+            for (e, (&k, &c)) in block.iter().zip(col).enumerate() {
+                let (o, xc) = (&self.off[(k & !AT_JI) as usize], x[c as usize]);
+                s[e & 1] += if k & AT_JI == 0 || (k & !AT_JI) < sym {
+                    *o * xc
+                } else {
+                    // (oᵀ x)_k = col_k · x
+                    Vector::new(o.x_axis.dot(xc), o.y_axis.dot(xc), o.z_axis.dot(xc))
+                };
+            }
         }
-        let k = self.symmetric;
-        for (o, &(i, j)) in self.off[..k].iter().zip(&self.pairs[..k]) {
-            let (i, j) = (i as usize, j as usize);
-            y[i] += *o * x[j];
-            y[j] += *o * x[i];
-        }
-        for (o, &(i, j)) in self.off[k..].iter().zip(&self.pairs[k..]) {
-            let (i, j) = (i as usize, j as usize);
-            y[i] += *o * x[j];
-            // (oᵀ x_i)_k = col_k · x_i
-            let xi = x[i];
-            y[j] += Vector::new(o.x_axis.dot(xi), o.y_axis.dot(xi), o.z_axis.dot(xi));
-        }
+        self.diag[i] * x[i] + (s[0] + s[1])
     }
 
     /// The dense matrix (row-major, `3n × 3n`), for tests and small systems.
@@ -140,6 +284,90 @@ impl SpringMatrix {
             put(j as usize, i as usize, &o.transpose());
         }
         a
+    }
+}
+
+/// A matrix's product as the solvers run it: by rows, or from the packed copy of its blocks
+/// in AVX lanes ([`packed`]); the two give the same bits.
+#[derive(Clone, Copy)]
+pub(crate) enum Product<'a> {
+    /// [`SpringMatrix::row_times`], row by row.
+    Rows(&'a SpringMatrix),
+    /// The packed copy, eight rows at a time (the copy said it serves the matrix).
+    Packed(&'a SpringMatrix, &'a packed::Packed),
+}
+
+impl<'a> Product<'a> {
+    /// The packed product when `packed` (just updated from `a`) serves it, else by rows.
+    pub(crate) fn of(a: &'a SpringMatrix, packed: &'a packed::Packed, usable: bool) -> Self {
+        if usable {
+            Product::Packed(a, packed)
+        } else {
+            Product::Rows(a)
+        }
+    }
+
+    /// The matrix.
+    pub(crate) fn matrix(self) -> &'a SpringMatrix {
+        match self {
+            Product::Rows(a) | Product::Packed(a, _) => a,
+        }
+    }
+
+    /// `y_i ← f(i, (A x)_i)` for every row, in chunks of [`CHUNK_ROWS`] on the team; with
+    /// `dot`, returns `Σ_i x_i · y_i` (summed per chunk, then over the chunks in order), else
+    /// zero.
+    ///
+    /// # Panics
+    /// If `x` or `y` is shorter than the matrix, or the matrix's structure changed after it
+    /// was built (its public block vectors resized).
+    pub(crate) fn mul_map(
+        self,
+        x: &[Vector],
+        y: &mut [Vector],
+        f: impl Fn(usize, Vector) -> Vector + Sync + Send,
+        dot: Option<&Partials>,
+    ) -> Scalar {
+        let a = self.matrix();
+        let n = a.len();
+        assert!(
+            x.len() >= n && y.len() >= n,
+            "vectors shorter than the matrix"
+        );
+        assert!(
+            a.rows.start.len() == n + 1 && a.off.len() == a.pairs.len(),
+            "the matrix's structure changed after it was built"
+        );
+        let yp = SharedMut(y.as_mut_ptr());
+        let chunk = |r: Range<usize>| {
+            // SAFETY: the chunks' ranges are disjoint and below `n ≤ y.len()`; `y` is
+            // borrowed exclusively for the call.
+            let y = unsafe { yp.slice(r.clone()) };
+            let mut d: Scalar = 0.0;
+            let mut put = |i: usize, ax: Vector| {
+                let yi = f(i, ax);
+                y[i - r.start] = yi;
+                d += x[i].dot(yi);
+            };
+            match self {
+                Product::Rows(a) => {
+                    for i in r.clone() {
+                        put(i, a.row_times(i, x));
+                    }
+                }
+                Product::Packed(a, p) => p.rows_times(a, r.clone(), x, &mut put),
+            }
+            [d]
+        };
+        match dot {
+            Some(p) => sum_rows(p, n, chunk)[0],
+            None => {
+                for_each_rows(n, |r, _| {
+                    chunk(r);
+                });
+                0.0
+            }
+        }
     }
 }
 
@@ -248,6 +476,16 @@ pub struct Pcg {
     p: Vec<Vector>,
     q: Vec<Vector>,
     inv_diag: Vec<Matrix3>,
+    /// Boxed, and taken out for each solve (see [`Scratch`]).
+    scratch: Option<Box<Scratch>>,
+}
+
+/// What a solve borrows while the preconditioner borrows the solver: the dot products'
+/// partial sums and the packed copy of the matrix.
+#[derive(Clone, Debug, Default)]
+struct Scratch {
+    partials: Partials,
+    packed: packed::Packed,
 }
 
 impl Default for Pcg {
@@ -302,8 +540,9 @@ fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
     }
 }
 
-fn dot(a: &[Vector], b: &[Vector]) -> Scalar {
-    a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum()
+/// `Σ a_i · b_i` over rows `r`.
+fn dot(a: &[Vector], b: &[Vector], r: Range<usize>) -> Scalar {
+    a[r.clone()].iter().zip(&b[r]).map(|(x, y)| x.dot(*y)).sum()
 }
 
 impl Pcg {
@@ -324,14 +563,19 @@ impl Pcg {
     }
 
     /// `z ← B r` for the preconditioner `B`.
-    fn precondition(&mut self, a: &SpringMatrix, mask: &[Scalar]) {
+    fn precondition(&mut self, a: Product<'_>, mask: &[Scalar]) {
         match self.active {
             Preconditioner::BlockJacobi => {
-                for ((z, inv), r) in self.z.iter_mut().zip(&self.inv_diag).zip(&self.r) {
-                    *z = *inv * *r;
-                }
+                let (z, inv, r) = (SharedMut(self.z.as_mut_ptr()), &self.inv_diag, &self.r);
+                for_each_rows(a.matrix().len(), |rows, _| {
+                    // SAFETY: disjoint ranges of `z`, which has the matrix's length.
+                    let z = unsafe { z.slice(rows.clone()) };
+                    for (z, i) in z.iter_mut().zip(rows) {
+                        *z = inv[i] * r[i];
+                    }
+                });
             }
-            _ => self.multigrid.apply(a, mask, &self.r, &mut self.z),
+            _ => self.multigrid.apply_with(a, mask, &self.r, &mut self.z),
         }
     }
 
@@ -348,12 +592,15 @@ impl Pcg {
             p: vec![],
             q: vec![],
             inv_diag: vec![],
+            scratch: None,
         }
     }
 
     /// Solves `A x = b` on the free degrees of freedom (`mask[i] = 1`) starting from `x`;
     /// entries with `mask[i] = 0` keep their value in `x`.
-    #[allow(clippy::needless_range_loop)] // one index over five parallel arrays
+    ///
+    /// # Panics
+    /// If `b`, `x` or `mask` is shorter than the matrix.
     pub fn solve(
         &mut self,
         a: &SpringMatrix,
@@ -372,17 +619,34 @@ impl Pcg {
             }
             _ => self.multigrid.setup(a, mask),
         }
-        // r = S (b − A x)
-        a.mul(x, &mut self.q);
-        for i in 0..n {
-            self.r[i] = (b[i] - self.q[i]) * mask[i];
-        }
-        let bnorm = b
-            .iter()
-            .zip(mask)
-            .map(|(v, m)| (*v * *m).length_squared())
-            .sum::<Scalar>()
-            .sqrt();
+        assert!(
+            b.len() >= n && x.len() >= n && mask.len() >= n,
+            "vectors shorter than the matrix"
+        );
+        // Taken out for the solve (the preconditioner borrows `self`), put back at the end.
+        let mut scratch = self.scratch.take().unwrap_or_default();
+        let usable = scratch.packed.update(a);
+        let op = Product::of(a, &scratch.packed, usable);
+        let report = self.iterate(op, b, x, mask, &scratch.partials);
+        self.scratch = Some(scratch);
+        report
+    }
+
+    fn iterate(
+        &mut self,
+        op: Product<'_>,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        partials: &Partials,
+    ) -> PcgReport {
+        let n = op.matrix().len();
+        // r = S (b − A x), and ‖S b‖²
+        op.mul_map(x, &mut self.r, |i, ax| (b[i] - ax) * mask[i], None);
+        let [bb] = sum_rows(partials, n, |rows| {
+            [rows.map(|i| (b[i] * mask[i]).length_squared()).sum()]
+        });
+        let bnorm = bb.sqrt();
         if bnorm == 0.0 {
             for (xi, m) in x.iter_mut().zip(mask) {
                 if *m != 0.0 {
@@ -396,48 +660,86 @@ impl Pcg {
                 failed: false,
             };
         }
-        self.precondition(a, mask);
-        for i in 0..n {
-            self.p[i] = self.z[i] * mask[i];
-        }
-        let mut rz = dot(&self.r, &self.z);
+        self.precondition(op, mask);
+        let [mut rz, rr] = {
+            let (p, r, z) = (SharedMut(self.p.as_mut_ptr()), &self.r, &self.z);
+            sum_rows(partials, n, |rows| {
+                // SAFETY: disjoint ranges of `p`, which has the matrix's length.
+                let p = unsafe { p.slice(rows.clone()) };
+                for (p, i) in p.iter_mut().zip(rows.clone()) {
+                    *p = z[i] * mask[i];
+                }
+                [dot(r, z, rows.clone()), dot(r, r, rows)]
+            })
+        };
         let mut it = 0;
-        let mut rel = dot(&self.r, &self.r).sqrt() / bnorm;
+        let mut rel = rr.sqrt() / bnorm;
         let mut failed = !rel.is_finite();
+        let xp = SharedMut(x.as_mut_ptr());
         while rel > self.tolerance && it < self.max_iterations && !failed {
-            a.mul(&self.p, &mut self.q);
-            for (qi, m) in self.q.iter_mut().zip(mask) {
-                *qi *= *m;
-            }
-            let pq = dot(&self.p, &self.q);
+            // q = S A p, and p · q
+            let pq = op.mul_map(&self.p, &mut self.q, |i, ap| ap * mask[i], Some(partials));
             if pq.is_nan() || pq <= 0.0 {
                 // Not positive definite along p, or a non-finite value: the answer is unusable.
                 failed = true;
                 break;
             }
             let alpha = rz / pq;
-            if self.active == Preconditioner::BlockJacobi {
-                // Fused: one sweep over the vectors.
-                for i in 0..n {
-                    x[i] += self.p[i] * alpha;
-                    self.r[i] -= self.q[i] * alpha;
-                    self.z[i] = self.inv_diag[i] * self.r[i];
-                }
+            let (rp, zp) = (
+                SharedMut(self.r.as_mut_ptr()),
+                SharedMut(self.z.as_mut_ptr()),
+            );
+            let (p, q, inv) = (&self.p, &self.q, &self.inv_diag);
+            let [rz_new, rr] = if self.active == Preconditioner::BlockJacobi {
+                // Fused: one pass over the vectors.
+                sum_rows(partials, n, |rows| {
+                    // SAFETY: disjoint ranges of `x`, `r` and `z`, which have the matrix's
+                    // length.
+                    let (x, r, z) = unsafe {
+                        (
+                            xp.slice(rows.clone()),
+                            rp.slice(rows.clone()),
+                            zp.slice(rows.clone()),
+                        )
+                    };
+                    let (mut rz, mut rr): (Scalar, Scalar) = (0.0, 0.0);
+                    for (k, i) in rows.enumerate() {
+                        x[k] += p[i] * alpha;
+                        r[k] -= q[i] * alpha;
+                        z[k] = inv[i] * r[k];
+                        rz += r[k].dot(z[k]);
+                        rr += r[k].length_squared();
+                    }
+                    [rz, rr]
+                })
             } else {
-                for i in 0..n {
-                    x[i] += self.p[i] * alpha;
-                    self.r[i] -= self.q[i] * alpha;
-                }
-                self.precondition(a, mask);
-            }
-            let rz_new = dot(&self.r, &self.z);
+                let [rr] = sum_rows(partials, n, |rows| {
+                    // SAFETY: disjoint ranges of `x` and `r`, which have the matrix's length.
+                    let (x, r) = unsafe { (xp.slice(rows.clone()), rp.slice(rows.clone())) };
+                    let mut rr: Scalar = 0.0;
+                    for (k, i) in rows.enumerate() {
+                        x[k] += p[i] * alpha;
+                        r[k] -= q[i] * alpha;
+                        rr += r[k].length_squared();
+                    }
+                    [rr]
+                });
+                self.precondition(op, mask);
+                let (r, z) = (&self.r, &self.z);
+                [sum_rows(partials, n, |rows| [dot(r, z, rows)])[0], rr]
+            };
             let beta = rz_new / rz;
             rz = rz_new;
-            for i in 0..n {
-                self.p[i] = (self.z[i] + self.p[i] * beta) * mask[i];
-            }
+            let (pp, z) = (SharedMut(self.p.as_mut_ptr()), &self.z);
+            for_each_rows(n, |rows, _| {
+                // SAFETY: disjoint ranges of `p`, which has the matrix's length.
+                let p = unsafe { pp.slice(rows.clone()) };
+                for (p, i) in p.iter_mut().zip(rows) {
+                    *p = (z[i] + *p * beta) * mask[i];
+                }
+            });
             it += 1;
-            rel = dot(&self.r, &self.r).sqrt() / bnorm;
+            rel = rr.sqrt() / bnorm;
             failed |= !rel.is_finite();
         }
         PcgReport {

@@ -27,7 +27,8 @@
 //! dropped and their diagonal blocks replaced by the identity, so the cycle returns zero for
 //! them and the free part is preconditioned as the filtered conjugate gradients iterate on it.
 
-use super::SpringMatrix;
+use super::{Product, SpringMatrix, for_each_rows};
+use crate::core::kernels::SharedMut;
 use crate::math::{Matrix3, Scalar, Vector};
 
 /// A level stops being coarsened below this many nodes (solved densely), or when aggregation
@@ -435,21 +436,34 @@ impl Multigrid {
     /// `z ← B r` for the V-cycle `B ≈ A⁻¹` of the last [`setup`](Self::setup) (`a` and
     /// `mask` the ones given to it).
     pub fn apply(&mut self, a: &SpringMatrix, mask: &[Scalar], r: &[Vector], z: &mut [Vector]) {
+        self.apply_with(Product::Rows(a), mask, r, z);
+    }
+
+    /// [`apply`](Self::apply) with the matrix's product `a`.
+    pub(crate) fn apply_with(
+        &mut self,
+        a: Product<'_>,
+        mask: &[Scalar],
+        r: &[Vector],
+        z: &mut [Vector],
+    ) {
         let nl = self.levels.len();
         let w = self.omega;
         {
             let fine = &mut self.levels[0];
-            for ((z, inv), r) in fine.z.iter_mut().zip(&fine.inv).zip(r) {
-                *z = *inv * *r * w;
-            }
+            let (zp, inv) = (SharedMut(fine.z.as_mut_ptr()), &fine.inv);
+            for_each_rows(fine.len(), |rows, _| {
+                // SAFETY: disjoint ranges of the level's `z`.
+                let z = unsafe { zp.slice(rows.clone()) };
+                for (z, i) in z.iter_mut().zip(rows) {
+                    *z = inv[i] * r[i] * w;
+                }
+            });
             if nl == 1 {
                 z.copy_from_slice(&fine.z);
                 return;
             }
-            a.mul(&fine.z, &mut fine.t);
-            for ((t, r), m) in fine.t.iter_mut().zip(r).zip(mask) {
-                *t = (*r - *t) * *m;
-            }
+            a.mul_map(&fine.z, &mut fine.t, |i, az| (r[i] - az) * mask[i], None);
         }
         for l in 0..nl - 1 {
             let (done, rest) = self.levels.split_at_mut(l + 1);
@@ -476,17 +490,24 @@ impl Multigrid {
                 let m = fine.len();
                 fine.sweep((0..m).rev());
             } else {
-                for ((z, &a), m) in fine.z.iter_mut().zip(&fine.agg).zip(mask) {
-                    *z += coarse.z[a as usize] * *m;
-                }
+                let (zp, agg) = (SharedMut(fine.z.as_mut_ptr()), &fine.agg);
+                for_each_rows(fine.len(), |rows, _| {
+                    // SAFETY: disjoint ranges of the level's `z`.
+                    let z = unsafe { zp.slice(rows.clone()) };
+                    for (z, i) in z.iter_mut().zip(rows) {
+                        *z += coarse.z[agg[i] as usize] * mask[i];
+                    }
+                });
             }
         }
-        let fine = &mut self.levels[0];
-        a.mul(&fine.z, &mut fine.t);
+        let fine = &self.levels[0];
         // Masked particles: r = 0, D⁻¹ = I and z = 0, so they stay at zero.
-        for (i, z) in z.iter_mut().enumerate() {
-            *z = fine.z[i] + fine.inv[i] * (r[i] - fine.t[i]) * (w * mask[i]);
-        }
+        a.mul_map(
+            &fine.z,
+            z,
+            |i, az| fine.z[i] + fine.inv[i] * (r[i] - az) * (w * mask[i]),
+            None,
+        );
     }
 }
 
