@@ -1,6 +1,15 @@
 //! Linear algebra for implicit steps: a symmetric block-sparse matrix with the sparsity of a
 //! spring network, preconditioned conjugate gradients with Baraff–Witkin's constraint filter,
 //! and a sparse direct (Cholesky) solve through faer.
+//!
+//! The conjugate gradients' work runs in chunks of rows ([`CHUNK_ROWS`]) shared with the team
+//! of threads the caller runs in ([`kernels::with_threads`]): the matrix product by rows
+//! (each off-diagonal block used from both its rows, so no row is written by two chunks), the
+//! vector updates, the multigrid's finest level, and the dot products summed per chunk and
+//! then over the chunks in order. The chunks depend on the system's size alone, so a solve
+//! gives the same bits on any number of threads. Where the processor has AVX, the products of
+//! matrices whose blocks are all symmetric (springs') run eight rows (four in `f64`) at a time
+//! from a packed copy of the blocks (`packed`), with the same bits as by rows.
 
 pub(crate) mod cholesky;
 pub mod multigrid;

@@ -16,32 +16,35 @@
 //! the same bits: the product does not depend on the processor having AVX, nor on the number
 //! of threads.
 
-#[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+#[cfg(target_arch = "x86_64")]
 use super::AT_JI;
 use super::SpringMatrix;
+#[cfg(target_arch = "x86_64")]
+use crate::math::Scalar;
 use crate::math::Vector;
 use std::ops::Range;
 
-/// Rows a group packs: one per lane of an 8-lane register.
+/// Rows a group packs: one per lane of a 256-bit register (eight `f32`, four `f64`).
+#[cfg(not(feature = "f64"))]
 pub(crate) const LANES: usize = 8;
+/// Rows a group packs: one per lane of a 256-bit register (eight `f32`, four `f64`).
+#[cfg(feature = "f64")]
+pub(crate) const LANES: usize = 4;
 
 /// One step of a group: its eight rows' entries at one place in the rows.
-#[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+#[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
 struct Step {
+    /// `xx, yy, zz, xy, xz, yz`, lane by lane: each a whole, aligned 32-byte register.
+    b: [[Scalar; LANES]; 6],
     col: [u32; LANES],
-    /// `xx, yy, zz, xy, xz, yz`, lane by lane.
-    b: [[f32; LANES]; 6],
 }
 
-/// The packed copy (see the module docs). Empty, and not used, in the `f64` build, on other
-/// processors than x86-64 with AVX, and for matrices with blocks that are not symmetric.
+/// The packed copy (see the module docs). Empty, and not used, on other processors than
+/// x86-64 with AVX, and for matrices with blocks that are not symmetric.
 #[derive(Clone, Debug, Default)]
-#[cfg_attr(
-    not(all(target_arch = "x86_64", not(feature = "f64"))),
-    allow(dead_code) // never filled in this build
-)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))] // never filled there
 pub(crate) struct Packed {
     /// The structure packed ([`SpringMatrix::structure`]), and whether this copy serves it.
     structure: u64,
@@ -50,7 +53,7 @@ pub(crate) struct Packed {
     group: Vec<u32>,
     /// Each step's lanes' blocks (indices into the matrix's `off`; `u32::MAX`: padding).
     slot: Vec<u32>,
-    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[cfg(target_arch = "x86_64")]
     steps: Vec<Step>,
 }
 
@@ -58,7 +61,7 @@ impl Packed {
     /// Packs `a`'s blocks (their places first, when `a`'s structure is new) and says whether
     /// the copy can serve `a`'s products.
     pub(crate) fn update(&mut self, a: &SpringMatrix) -> bool {
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        #[cfg(target_arch = "x86_64")]
         {
             if self.structure != a.structure || self.group.is_empty() {
                 self.analyse(a);
@@ -68,14 +71,14 @@ impl Packed {
             }
             self.usable
         }
-        #[cfg(not(all(target_arch = "x86_64", not(feature = "f64"))))]
+        #[cfg(not(target_arch = "x86_64"))]
         {
             let _ = a;
             false
         }
     }
 
-    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[cfg(target_arch = "x86_64")]
     fn analyse(&mut self, a: &SpringMatrix) {
         self.structure = a.structure;
         self.usable = !a.is_empty()
@@ -119,7 +122,7 @@ impl Packed {
     }
 
     /// The blocks' values into the steps.
-    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[cfg(target_arch = "x86_64")]
     fn fill(&mut self, a: &SpringMatrix) {
         let slots = self.slot.chunks_exact(LANES);
         for (step, slot) in self.steps.iter_mut().zip(slots) {
@@ -146,7 +149,7 @@ impl Packed {
         x: &[Vector],
         put: &mut impl FnMut(usize, Vector),
     ) {
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        #[cfg(target_arch = "x86_64")]
         {
             assert!(
                 self.usable && self.structure == a.structure && x.len() >= a.len(),
@@ -166,7 +169,7 @@ impl Packed {
                 }
             }
         }
-        #[cfg(not(all(target_arch = "x86_64", not(feature = "f64"))))]
+        #[cfg(not(target_arch = "x86_64"))]
         {
             let _ = (a, r, x, put);
             unreachable!("the packed copy is never usable in this build");
@@ -226,6 +229,65 @@ unsafe fn group_sums(steps: &[Step], x: &[Vector]) -> [Vector; LANES] {
     avx::rows(sum(0), sum(1), sum(2)).map(Vector::from)
 }
 
+/// [`group_sums`] in the `f64` build: four rows, each column's `DVec3` loaded whole (a masked
+/// load: its 24 bytes, never the next vector's).
+///
+/// # Safety
+/// AVX is available; every step's columns index `x`.
+#[cfg(all(target_arch = "x86_64", feature = "f64"))]
+#[target_feature(enable = "avx")]
+unsafe fn group_sums(steps: &[Step], x: &[Vector]) -> [Vector; LANES] {
+    use crate::core::kernels::avx::transpose_pd;
+    use std::arch::x86_64::*;
+    let zero = _mm256_setzero_pd();
+    let xyz = _mm256_set_epi64x(0, -1, -1, -1);
+    let terms = |step: &Step| {
+        // SAFETY: the columns are within `x` (the caller's promise); the masked load reads
+        // the vector's three lanes only; the step is 32-byte aligned.
+        let r: [__m256d; LANES] = std::array::from_fn(|q| unsafe {
+            _mm256_maskload_pd(
+                x.get_unchecked(step.col[q] as usize) as *const Vector as *const f64,
+                xyz,
+            )
+        });
+        let [cx, cy, cz, _] = transpose_pd(r[0], r[1], r[2], r[3]);
+        let b = |c: usize| unsafe { _mm256_load_pd(step.b[c].as_ptr()) };
+        let (xx, yy, zz, xy, xz, yz) = (b(0), b(1), b(2), b(3), b(4), b(5));
+        let term = |p: __m256d, q: __m256d, w: __m256d| {
+            _mm256_add_pd(
+                _mm256_add_pd(_mm256_mul_pd(p, cx), _mm256_mul_pd(q, cy)),
+                _mm256_mul_pd(w, cz),
+            )
+        };
+        [term(xx, xy, xz), term(xy, yy, yz), term(xz, yz, zz)]
+    };
+    let add = |s: [__m256d; 3], t: [__m256d; 3]| {
+        [
+            _mm256_add_pd(s[0], t[0]),
+            _mm256_add_pd(s[1], t[1]),
+            _mm256_add_pd(s[2], t[2]),
+        ]
+    };
+    let mut s = [[zero; 3]; 2];
+    let pairs = steps.chunks_exact(2);
+    let last = pairs.remainder();
+    for pair in pairs {
+        s[0] = add(s[0], terms(&pair[0]));
+        s[1] = add(s[1], terms(&pair[1]));
+    }
+    if let [step] = last {
+        s[0] = add(s[0], terms(step));
+    }
+    let sum = |c: usize| _mm256_add_pd(s[0][c], s[1][c]);
+    let rows = transpose_pd(sum(0), sum(1), sum(2), zero);
+    rows.map(|r| {
+        let mut v = [0.0; 4];
+        // SAFETY: four f64s into a four-f64 array.
+        unsafe { _mm256_storeu_pd(v.as_mut_ptr(), r) };
+        Vector::new(v[0], v[1], v[2])
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::{Product, SpringMatrix};
@@ -281,7 +343,7 @@ mod tests {
                 .collect();
             let mut packed = Packed::default();
             let usable = packed.update(&a);
-            #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+            #[cfg(target_arch = "x86_64")]
             assert_eq!(usable, std::arch::is_x86_feature_detected!("avx"));
             if !usable {
                 return;
