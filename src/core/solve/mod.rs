@@ -539,14 +539,19 @@ impl Preconditioner {
 /// `inv[i] ← diag[i]⁻¹`, the identity where a block is singular or not finite.
 fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
     inv.resize(diag.len(), Matrix3::IDENTITY);
-    for (inv, d) in inv.iter_mut().zip(diag) {
-        let det = d.determinant();
-        *inv = if det.is_normal() {
-            d.inverse()
-        } else {
-            Matrix3::IDENTITY
-        };
-    }
+    let out = SharedMut(inv.as_mut_ptr());
+    for_each_rows(diag.len(), |rows, _| {
+        // SAFETY: disjoint ranges of `inv`, which has the diagonal's length.
+        let inv = unsafe { out.slice(rows.clone()) };
+        for (inv, d) in inv.iter_mut().zip(&diag[rows]) {
+            let det = d.determinant();
+            *inv = if det.is_normal() {
+                d.inverse()
+            } else {
+                Matrix3::IDENTITY
+            };
+        }
+    });
 }
 
 /// `Σ a_i · b_i` over rows `r`.

@@ -124,20 +124,30 @@ impl Packed {
     /// The blocks' values into the steps.
     #[cfg(target_arch = "x86_64")]
     fn fill(&mut self, a: &SpringMatrix) {
-        let slots = self.slot.chunks_exact(LANES);
-        for (step, slot) in self.steps.iter_mut().zip(slots) {
-            for (q, &k) in slot.iter().enumerate() {
-                let b = match a.off.get(k as usize) {
-                    Some(o) => [
-                        o.x_axis.x, o.y_axis.y, o.z_axis.z, o.x_axis.y, o.x_axis.z, o.y_axis.z,
-                    ],
-                    None => [0.0; 6],
-                };
-                for (c, v) in step.b.iter_mut().zip(b) {
-                    c[q] = v;
+        // By the solve's chunks of rows, on the team: whole groups, so each chunk's steps are
+        // its own.
+        let (group, slot) = (&self.group, &self.slot);
+        let out = crate::core::kernels::SharedMut(self.steps.as_mut_ptr());
+        super::for_each_rows(a.len(), |rows, _| {
+            let (g0, g1) = (rows.start / LANES, rows.end.div_ceil(LANES));
+            let steps = group[g0] as usize..group[g1] as usize;
+            let slots = slot[LANES * steps.start..LANES * steps.end].chunks_exact(LANES);
+            // SAFETY: the chunks' groups, and so their steps, are disjoint and within `self.steps`.
+            let steps = unsafe { out.slice(steps) };
+            for (step, slot) in steps.iter_mut().zip(slots) {
+                for (q, &k) in slot.iter().enumerate() {
+                    let b = match a.off.get(k as usize) {
+                        Some(o) => [
+                            o.x_axis.x, o.y_axis.y, o.z_axis.z, o.x_axis.y, o.x_axis.z, o.y_axis.z,
+                        ],
+                        None => [0.0; 6],
+                    };
+                    for (c, v) in step.b.iter_mut().zip(b) {
+                        c[q] = v;
+                    }
                 }
             }
-        }
+        });
     }
 
     /// `put(i, (A x)_i)` for the rows `r` (`r.start` a multiple of [`LANES`]), `a` the matrix
