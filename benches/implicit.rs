@@ -17,7 +17,9 @@ use bevy_soft_body::core::integrate::{BackwardEuler, Integrator, LinearlyImplici
 use bevy_soft_body::core::solve::LinearSolver;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, criterion_group, criterion_main};
-use std::time::{Duration, Instant};
+
+mod common;
+use common::timed;
 
 type Boxed = Box<dyn Integrator<ParticleState, ParticleModel>>;
 
@@ -30,21 +32,6 @@ fn method(name: &str) -> Boxed {
         "newton_cholesky" => Box::new(BackwardEuler::new(chol(), 5)),
         _ => unreachable!(),
     }
-}
-
-/// Times `iters` runs of `work` on a team of `THREADS` threads (default: all cores).
-fn timed(iters: u64, mut work: impl FnMut() + Send) -> Duration {
-    let threads = std::env::var("THREADS")
-        .ok()
-        .and_then(|t| t.parse().ok())
-        .unwrap_or(0);
-    bevy_soft_body::core::kernels::with_threads(threads, || {
-        let t0 = Instant::now();
-        for _ in 0..iters {
-            work();
-        }
-        t0.elapsed()
-    })
 }
 
 fn bench(c: &mut Criterion) {

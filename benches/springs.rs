@@ -13,8 +13,10 @@
 use bevy_soft_body::core::ode::OdeSystem;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+
+mod common;
+use common::timed;
 use std::hint::black_box;
-use std::time::{Duration, Instant};
 
 fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
     let p = build::ClothParams {
@@ -31,21 +33,6 @@ fn cloth(damping: f64) -> (ParticleModel, ParticleState) {
         *v = Vector::new(s, -s, 0.5 * s);
     }
     (model, state)
-}
-
-/// Times `iters` runs of `work` on a team of `THREADS` threads (default: all cores).
-fn timed(iters: u64, mut work: impl FnMut() + Send) -> Duration {
-    let threads = std::env::var("THREADS")
-        .ok()
-        .and_then(|t| t.parse().ok())
-        .unwrap_or(0);
-    bevy_soft_body::core::kernels::with_threads(threads, || {
-        let t0 = Instant::now();
-        for _ in 0..iters {
-            work();
-        }
-        t0.elapsed()
-    })
 }
 
 fn bench(c: &mut Criterion) {

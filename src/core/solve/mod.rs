@@ -55,6 +55,10 @@ impl Rows {
         );
         let mut start = vec![0u32; n + 1];
         for &(i, j) in pairs {
+            assert!(
+                (i as usize) < n && (j as usize) < n,
+                "block ({i}, {j}) outside a matrix of {n} block rows"
+            );
             start[i as usize + 1] += 1;
             start[j as usize + 1] += 1;
         }
@@ -153,6 +157,9 @@ impl SpringMatrix {
     }
 
     /// A zero matrix for `n` particles with off-diagonal blocks at `pairs`.
+    ///
+    /// # Panics
+    /// If a pair names a row past `n`.
     pub fn with_pairs(n: usize, pairs: Vec<(u32, u32)>) -> Self {
         Self {
             diag: vec![Matrix3::ZERO; n],
