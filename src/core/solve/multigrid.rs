@@ -434,7 +434,11 @@ impl Multigrid {
     }
 
     /// `z ← B r` for the V-cycle `B ≈ A⁻¹` of the last [`setup`](Self::setup) (`a` and
-    /// `mask` the ones given to it).
+    /// `mask` the ones given to it), its finest level's passes in chunks of rows on the team
+    /// the caller runs in (the same bits on any number of threads).
+    ///
+    /// # Panics
+    /// If `r`, `z` or `mask` is shorter than the matrix, or before any setup.
     pub fn apply(&mut self, a: &SpringMatrix, mask: &[Scalar], r: &[Vector], z: &mut [Vector]) {
         self.apply_with(Product::Rows(a), mask, r, z);
     }
@@ -448,6 +452,11 @@ impl Multigrid {
         z: &mut [Vector],
     ) {
         let nl = self.levels.len();
+        let n = self.levels.first().map_or(0, Level::len);
+        assert!(
+            r.len() >= n && z.len() >= n && mask.len() >= n,
+            "vectors shorter than the multigrid's finest level"
+        );
         let w = self.omega;
         {
             let fine = &mut self.levels[0];
@@ -460,7 +469,7 @@ impl Multigrid {
                 }
             });
             if nl == 1 {
-                z.copy_from_slice(&fine.z);
+                z[..n].copy_from_slice(&fine.z);
                 return;
             }
             a.mul_map(&fine.z, &mut fine.t, |i, az| (r[i] - az) * mask[i], None);

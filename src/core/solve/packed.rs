@@ -1,14 +1,21 @@
 //! The matrix product in AVX lanes: a copy of a [`SpringMatrix`]'s symmetric off-diagonal
-//! blocks packed for eight rows at a time.
+//! blocks packed for eight rows at a time (four in `f64`).
 //!
-//! By rows ([`SpringMatrix::mul_map`]) a product costs about three cycles per block and row
-//! on this crate's machine, most of it the three lane shuffles of each 3×3 block times a
-//! vector. Here eight consecutive rows go through their entries together, one entry of each
-//! row per step: a step holds the eight entries' columns and their blocks' six numbers (a
-//! symmetric block's `xx, yy, zz, xy, xz, yz`) lane by lane, so a step is eight loads of the
-//! columns' vectors, one transpose and nine multiplications and additions in 8-lane
-//! registers. Rows of a group shorter than its longest are padded with zero blocks at their
-//! own column.
+//! Eight consecutive rows go through their entries together, one entry of each row per step:
+//! a step holds the eight entries' blocks' six numbers (a symmetric block's `xx, yy, zz, xy,
+//! xz, yz`) lane by lane and their columns, so a step is eight loads of the columns' vectors,
+//! one transpose and nine multiplications and additions in 8-lane registers, where by rows
+//! ([`SpringMatrix::mul_map`]) each entry takes three shuffles, three multiplications and
+//! three additions of its own. Rows of a group shorter than its longest are padded with zero
+//! blocks at their own column.
+//!
+//! What this buys depends on where the blocks live: a product reads every block twice (once
+//! from each of its rows), 28 bytes an entry in `f32`, and once the matrix is larger than a
+//! core's L2 cache the product is bound by those bytes (on the 128² cloth, 5.5 MB a product
+//! at about 25 GB/s on one core of the project's machine), not by the arithmetic. On the 64²
+//! bench cloth, whose copy fits, the lanes pay: its `f64` solve took 20.3 ms a step against
+//! 22.2 by rows on one thread, 9.2 against 12.9 on two (see `docs/BENCHMARKS.md`, "Implicit
+//! methods").
 //!
 //! The copy is refilled from the matrix at every solve (its structure once per structure).
 //! The lanes compute each row's sum exactly as [`SpringMatrix::mul_map`] does by rows (the
@@ -31,7 +38,7 @@ pub(crate) const LANES: usize = 8;
 #[cfg(feature = "f64")]
 pub(crate) const LANES: usize = 4;
 
-/// One step of a group: its eight rows' entries at one place in the rows.
+/// One step of a group: its rows' entries at one place in the rows.
 #[cfg(target_arch = "x86_64")]
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
