@@ -99,11 +99,10 @@ pub(crate) fn chunking(n: usize) -> (usize, usize) {
     (size, n.div_ceil(size))
 }
 
-/// Runs `job(r, c)` for each chunk `c` of rows `r` of a system of `n` rows ([`chunking`]), on
-/// the team.
-pub(crate) fn for_each_rows(n: usize, job: impl Fn(Range<usize>, usize) + Sync + Send) {
-    let (size, chunks) = chunking(n);
-    kernels::for_each_chunk(chunks, |c| job(c * size..((c + 1) * size).min(n), c));
+/// Runs `job(r)` for each chunk of rows `r` of a system of `n` rows ([`chunking`]), on the
+/// team.
+pub(crate) fn for_each_rows(n: usize, job: impl Fn(Range<usize>) + Sync + Send) {
+    kernels::for_each_range(n, chunking(n).0, job);
 }
 
 /// `Σ_i part(i)` over each chunk's rows, summed per chunk and then over the chunks in order
@@ -378,7 +377,7 @@ impl<'a> Product<'a> {
         match dot {
             Some(p) => sum_rows(p, n, chunk)[0],
             None => {
-                for_each_rows(n, |r, _| {
+                for_each_rows(n, |r| {
                     chunk(r);
                 });
                 0.0
@@ -547,7 +546,7 @@ impl Preconditioner {
 fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
     inv.resize(diag.len(), Matrix3::IDENTITY);
     let out = SharedMut(inv.as_mut_ptr());
-    for_each_rows(diag.len(), |rows, _| {
+    for_each_rows(diag.len(), |rows| {
         // SAFETY: disjoint ranges of `inv`, which has the diagonal's length.
         let inv = unsafe { out.slice(rows.clone()) };
         for (inv, d) in inv.iter_mut().zip(&diag[rows]) {
@@ -588,7 +587,7 @@ impl Pcg {
         match self.active {
             Preconditioner::BlockJacobi => {
                 let (z, inv, r) = (SharedMut(self.z.as_mut_ptr()), &self.inv_diag, &self.r);
-                for_each_rows(a.matrix().len(), |rows, _| {
+                for_each_rows(a.matrix().len(), |rows| {
                     // SAFETY: disjoint ranges of `z`, which has the matrix's length.
                     let z = unsafe { z.slice(rows.clone()) };
                     for (z, i) in z.iter_mut().zip(rows) {
@@ -752,7 +751,7 @@ impl Pcg {
             let beta = rz_new / rz;
             rz = rz_new;
             let (pp, z) = (SharedMut(self.p.as_mut_ptr()), &self.z);
-            for_each_rows(n, |rows, _| {
+            for_each_rows(n, |rows| {
                 // SAFETY: disjoint ranges of `p`, which has the matrix's length.
                 let p = unsafe { pp.slice(rows.clone()) };
                 for (p, i) in p.iter_mut().zip(rows) {

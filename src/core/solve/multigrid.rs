@@ -461,7 +461,7 @@ impl Multigrid {
         {
             let fine = &mut self.levels[0];
             let (zp, inv) = (SharedMut(fine.z.as_mut_ptr()), &fine.inv);
-            for_each_rows(fine.len(), |rows, _| {
+            for_each_rows(fine.len(), |rows| {
                 // SAFETY: disjoint ranges of the level's `z`.
                 let z = unsafe { zp.slice(rows.clone()) };
                 for (z, i) in z.iter_mut().zip(rows) {
@@ -500,7 +500,7 @@ impl Multigrid {
                 fine.sweep((0..m).rev());
             } else {
                 let (zp, agg) = (SharedMut(fine.z.as_mut_ptr()), &fine.agg);
-                for_each_rows(fine.len(), |rows, _| {
+                for_each_rows(fine.len(), |rows| {
                     // SAFETY: disjoint ranges of the level's `z`.
                     let z = unsafe { zp.slice(rows.clone()) };
                     for (z, i) in z.iter_mut().zip(rows) {

@@ -135,7 +135,7 @@ impl Packed {
         // its own.
         let (group, slot) = (&self.group, &self.slot);
         let out = crate::core::kernels::SharedMut(self.steps.as_mut_ptr());
-        super::for_each_rows(a.len(), |rows, _| {
+        super::for_each_rows(a.len(), |rows| {
             let (g0, g1) = (rows.start / LANES, rows.end.div_ceil(LANES));
             let steps = group[g0] as usize..group[g1] as usize;
             let slots = slot[LANES * steps.start..LANES * steps.end].chunks_exact(LANES);
@@ -194,6 +194,32 @@ impl Packed {
     }
 }
 
+/// Per lane, the sums of a group's steps' `terms` (x, y and z of the lanes' rows) in the order
+/// [`SpringMatrix::row_times`] sums a row: the even steps' into one set of sums and the odd
+/// steps' into another, two steps at a time (the sums stay in registers), then the two added.
+/// `add` is the lanes' addition of either precision's kernel.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn even_odd_sums<T: Copy>(
+    steps: &[Step],
+    zero: T,
+    terms: impl Fn(&Step) -> [T; 3],
+    add: impl Fn(T, T) -> T,
+) -> [T; 3] {
+    let add3 = |s: [T; 3], t: [T; 3]| [add(s[0], t[0]), add(s[1], t[1]), add(s[2], t[2])];
+    let mut s = [[zero; 3]; 2];
+    let pairs = steps.chunks_exact(2);
+    let last = pairs.remainder();
+    for pair in pairs {
+        s[0] = add3(s[0], terms(&pair[0]));
+        s[1] = add3(s[1], terms(&pair[1]));
+    }
+    if let [step] = last {
+        s[0] = add3(s[0], terms(step));
+    }
+    add3(s[0], s[1])
+}
+
 /// The eight rows' sums of a group's steps: per lane, the even steps' terms and the odd
 /// steps' summed apart and then added, each term `(b_x0 x + b_x1 y) + b_x2 z` (and so on for
 /// y and z), as [`SpringMatrix::row_times`] sums a row.
@@ -224,26 +250,8 @@ unsafe fn group_sums(steps: &[Step], x: &[Vector]) -> [Vector; LANES] {
         };
         [term(xx, xy, xz), term(xy, yy, yz), term(xz, yz, zz)]
     };
-    let add = |s: [__m256; 3], t: [__m256; 3]| {
-        [
-            _mm256_add_ps(s[0], t[0]),
-            _mm256_add_ps(s[1], t[1]),
-            _mm256_add_ps(s[2], t[2]),
-        ]
-    };
-    // Even steps into `s[0]`, odd ones into `s[1]`, two at a time (registers, not memory).
-    let mut s = [[zero; 3]; 2];
-    let pairs = steps.chunks_exact(2);
-    let last = pairs.remainder();
-    for pair in pairs {
-        s[0] = add(s[0], terms(&pair[0]));
-        s[1] = add(s[1], terms(&pair[1]));
-    }
-    if let [step] = last {
-        s[0] = add(s[0], terms(step));
-    }
-    let sum = |c: usize| _mm256_add_ps(s[0][c], s[1][c]);
-    avx::rows(sum(0), sum(1), sum(2)).map(Vector::from)
+    let [sx, sy, sz] = even_odd_sums(steps, zero, terms, |a, b| _mm256_add_ps(a, b));
+    avx::rows(sx, sy, sz).map(Vector::from)
 }
 
 /// [`group_sums`] in the `f64` build: four rows, each column's `DVec3` loaded whole (a masked
@@ -278,25 +286,8 @@ unsafe fn group_sums(steps: &[Step], x: &[Vector]) -> [Vector; LANES] {
         };
         [term(xx, xy, xz), term(xy, yy, yz), term(xz, yz, zz)]
     };
-    let add = |s: [__m256d; 3], t: [__m256d; 3]| {
-        [
-            _mm256_add_pd(s[0], t[0]),
-            _mm256_add_pd(s[1], t[1]),
-            _mm256_add_pd(s[2], t[2]),
-        ]
-    };
-    let mut s = [[zero; 3]; 2];
-    let pairs = steps.chunks_exact(2);
-    let last = pairs.remainder();
-    for pair in pairs {
-        s[0] = add(s[0], terms(&pair[0]));
-        s[1] = add(s[1], terms(&pair[1]));
-    }
-    if let [step] = last {
-        s[0] = add(s[0], terms(step));
-    }
-    let sum = |c: usize| _mm256_add_pd(s[0][c], s[1][c]);
-    let rows = transpose_pd(sum(0), sum(1), sum(2), zero);
+    let [sx, sy, sz] = even_odd_sums(steps, zero, terms, |a, b| _mm256_add_pd(a, b));
+    let rows = transpose_pd(sx, sy, sz, zero);
     rows.map(|r| {
         let mut v = [0.0; 4];
         // SAFETY: four f64s into a four-f64 array.
