@@ -97,6 +97,10 @@ pub struct SpringRows {
     damping: Vec<Scalar>,
     /// The lower particle of each spring.
     col_i: Vec<u32>,
+    /// Each spring's lower and upper particle as byte offsets into a slice of [`Vector`]s,
+    /// for the lane kernels (empty where the offsets would not fit in `u32`: the scalar loop
+    /// then takes every spring).
+    ends: Vec<[u32; 2]>,
     /// Particle `p`'s row is springs `row_start[p]..row_start[p + 1]`.
     row_start: Vec<u32>,
     /// The springs whose upper particle is `p`: `upper[upper_start[p]..upper_start[p + 1]]`.
@@ -175,7 +179,19 @@ impl SpringRows {
         let border = ChunkLists::new(crossing().map(|(_, (c, _))| (chunk_of(c.j), c.j)));
         let reach = ChunkLists::new(crossing().map(|(_, (c, i))| (chunk_of(*i), c.j)));
 
+        // Byte offsets: a load then takes no index arithmetic (the force pass's loop is bound
+        // by the processor's vector ports and issue width, and each spring's four loads
+        // needed a shift each).
+        let size = std::mem::size_of::<Vector>();
+        let ends = if bound.saturating_mul(size) <= u32::MAX as usize {
+            (cols.iter().zip(&col_i))
+                .map(|(c, &i)| [i * size as u32, c.j * size as u32])
+                .collect()
+        } else {
+            Vec::new()
+        };
         Self {
+            ends,
             j: cols.iter().map(|c| c.j).collect(),
             rest: cols.iter().map(|c| c.rest).collect(),
             k: cols.iter().map(|c| c.k).collect(),
@@ -296,7 +312,7 @@ impl SpringRows {
                 #[allow(unused_mut)]
                 let mut s = r.start;
                 #[cfg(target_arch = "x86_64")]
-                if avx {
+                if avx && !self.ends.is_empty() {
                     s = self.forces_avx(s, s1, x, v, buf.ptr());
                 }
                 self.forces(s, s1, x, v, buf.ptr());
@@ -415,57 +431,90 @@ impl SpringRows {
     #[target_feature(enable = "avx")]
     unsafe fn forces_avx(
         &self,
-        mut s: usize,
+        s: usize,
         s1: usize,
         x: &[Vector],
         v: Option<&[Vector]>,
         buf: *mut Slot,
     ) -> usize {
+        // SAFETY: as the caller guarantees.
+        unsafe {
+            match v {
+                Some(v) => self.lanes_f32::<true>(s, s1, x, v, buf),
+                None => self.lanes_f32::<false>(s, s1, x, x, buf),
+            }
+        }
+    }
+
+    /// [`Self::forces_avx`]'s loop, with the dampers' term when `DAMPED` (`v` is not read
+    /// otherwise).
+    ///
+    /// # Safety
+    /// As for [`Self::forces_avx`].
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[target_feature(enable = "avx")]
+    #[inline]
+    unsafe fn lanes_f32<const DAMPED: bool>(
+        &self,
+        mut s: usize,
+        s1: usize,
+        x: &[Vector],
+        v: &[Vector],
+        buf: *mut Slot,
+    ) -> usize {
         use super::avx::columns;
         use std::arch::x86_64::*;
-        // SAFETY: `s + 7 < s1 ≤` the number of springs; particle indices below the bound the caller
-        // guarantees; `Vec3A` is one `__m128`.
+        // SAFETY: `s + 7 < s1 ≤` the number of springs; the byte offsets address whole
+        // `Vec3A`s (16-byte aligned `__m128`s) of `x` and `v`, below the bound the caller
+        // guarantees.
         unsafe {
             let zero = _mm256_setzero_ps();
             let one = _mm256_set1_ps(1.0);
+            let (xb, vb) = (x.as_ptr() as *const u8, v.as_ptr() as *const u8);
+            let ends = self.ends.as_ptr();
+            let (rest_p, k_p, damping_p) =
+                (self.rest.as_ptr(), self.k.as_ptr(), self.damping.as_ptr());
+            let at = |b: *const u8, o: u32| _mm_load_ps(b.add(o as usize) as *const f32);
             while s + 8 <= s1 {
-                let (ii, jj) = (self.col_i.as_ptr().add(s), self.j.as_ptr().add(s));
-                let diff = |a: &[Vector], q: usize| -> Vector {
-                    *a.get_unchecked(*ii.add(q) as usize) - *a.get_unchecked(*jj.add(q) as usize)
-                };
-                let d: [Vector; 8] = std::array::from_fn(|q| diff(x, q));
-                let [dx, dy, dz, _] = columns(&d.map(Into::into));
-                let ld = |a: &[Scalar]| _mm256_loadu_ps(a.as_ptr().add(s));
-                let (rest, k, damping) = (ld(&self.rest), ld(&self.k), ld(&self.damping));
+                // Each spring's position difference and (damped) velocity difference from
+                // one read of its ends.
+                let mut d = [_mm_setzero_ps(); 8];
+                let mut w = [_mm_setzero_ps(); 8];
+                for q in 0..8 {
+                    let [oi, oj] = *ends.add(s + q);
+                    d[q] = _mm_sub_ps(at(xb, oi), at(xb, oj));
+                    if DAMPED {
+                        w[q] = _mm_sub_ps(at(vb, oi), at(vb, oj));
+                    }
+                }
+                let [dx, dy, dz, _] = columns(&d);
+                let ld = |a: *const Scalar| _mm256_loadu_ps(a.add(s));
+                let (rest, k) = (ld(rest_p), ld(k_p));
                 let dd = _mm256_add_ps(
                     _mm256_add_ps(_mm256_mul_ps(dx, dx), _mm256_mul_ps(dy, dy)),
                     _mm256_mul_ps(dz, dz),
                 );
                 let l = _mm256_sqrt_ps(dd);
                 let pos = _mm256_cmp_ps::<_CMP_GT_OQ>(l, zero);
-                let coef = match v {
-                    Some(v) => {
-                        let w: [__m128; 8] = std::array::from_fn(|q| diff(v, q).into());
-                        let [wx, wy, wz, _] = columns(&w);
-                        let inv = _mm256_and_ps(_mm256_div_ps(one, l), pos);
-                        let along = _mm256_mul_ps(
-                            _mm256_add_ps(
-                                _mm256_add_ps(_mm256_mul_ps(dx, wx), _mm256_mul_ps(dy, wy)),
-                                _mm256_mul_ps(dz, wz),
-                            ),
-                            inv,
-                        );
-                        let neg_k = _mm256_xor_ps(k, _mm256_set1_ps(-0.0));
-                        let mag = _mm256_sub_ps(
-                            _mm256_mul_ps(neg_k, _mm256_sub_ps(l, rest)),
-                            _mm256_mul_ps(damping, along),
-                        );
-                        _mm256_mul_ps(mag, inv)
-                    }
-                    None => {
-                        let r = _mm256_div_ps(rest, l);
-                        _mm256_and_ps(_mm256_mul_ps(k, _mm256_sub_ps(r, one)), pos)
-                    }
+                let coef = if DAMPED {
+                    let [wx, wy, wz, _] = columns(&w);
+                    let inv = _mm256_and_ps(_mm256_div_ps(one, l), pos);
+                    let along = _mm256_mul_ps(
+                        _mm256_add_ps(
+                            _mm256_add_ps(_mm256_mul_ps(dx, wx), _mm256_mul_ps(dy, wy)),
+                            _mm256_mul_ps(dz, wz),
+                        ),
+                        inv,
+                    );
+                    let neg_k = _mm256_xor_ps(k, _mm256_set1_ps(-0.0));
+                    let mag = _mm256_sub_ps(
+                        _mm256_mul_ps(neg_k, _mm256_sub_ps(l, rest)),
+                        _mm256_mul_ps(ld(damping_p), along),
+                    );
+                    _mm256_mul_ps(mag, inv)
+                } else {
+                    let r = _mm256_div_ps(rest, l);
+                    _mm256_and_ps(_mm256_mul_ps(k, _mm256_sub_ps(r, one)), pos)
                 };
                 // d c lane by lane (the products `Vec3A * f32` takes), back to rows.
                 let rows = super::avx::rows(
@@ -534,20 +583,23 @@ impl SpringRows {
     ) -> usize {
         use super::avx::transpose_pd;
         use std::arch::x86_64::*;
-        // SAFETY: `s + 3 < s1 ≤` the number of springs; particle indices below the bound the
-        // caller guarantees; a masked load reads only the three lanes of its `DVec3`; slots are
-        // 32-byte aligned.
+        // SAFETY: `s + 3 < s1 ≤` the number of springs; the byte offsets address whole `DVec3`s
+        // below the bound the caller guarantees; a masked load reads only the three lanes of its
+        // `DVec3`; slots are 32-byte aligned.
         unsafe {
             let zero = _mm256_setzero_pd();
             let one = _mm256_set1_pd(1.0);
             let xyz = _mm256_set_epi64x(0, -1, -1, -1);
+            let ends = self.ends.as_ptr();
             while s + 4 <= s1 {
-                let (ii, jj) = (self.col_i.as_ptr().add(s), self.j.as_ptr().add(s));
-                let load = |a: &[Vector], p: u32| {
-                    _mm256_maskload_pd(a.as_ptr().add(p as usize) as *const f64, xyz)
+                // The byte offsets of each spring's ends (see `ends`).
+                let e = |q: usize| *ends.add(s + q);
+                let load = |a: &[Vector], o: u32| {
+                    _mm256_maskload_pd((a.as_ptr() as *const u8).add(o as usize) as *const f64, xyz)
                 };
                 let diff = |a: &[Vector], q: usize| {
-                    _mm256_sub_pd(load(a, *ii.add(q)), load(a, *jj.add(q)))
+                    let [oi, oj] = e(q);
+                    _mm256_sub_pd(load(a, oi), load(a, oj))
                 };
                 let col = |a: &[Scalar]| _mm256_loadu_pd(a.as_ptr().add(s));
                 let d = [diff(x, 0), diff(x, 1), diff(x, 2), diff(x, 3)];
@@ -649,6 +701,7 @@ impl Clone for SpringRows {
             k: self.k.clone(),
             damping: self.damping.clone(),
             col_i: self.col_i.clone(),
+            ends: self.ends.clone(),
             row_start: self.row_start.clone(),
             upper_start: self.upper_start.clone(),
             upper: self.upper.clone(),
