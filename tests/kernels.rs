@@ -111,6 +111,151 @@ fn row_kernel_equals_the_reference_to_round_off() {
     }
 }
 
+/// A structured cloth: a `w × h` grid (2 cm, jittered by up to 5 mm, moving at up to 1 m/s)
+/// with its structural (offsets 1 and `w`), shear (`w ± 1`) and bending (2 and `2w`) springs,
+/// each pushed in either orientation with its own rest length, stiffness and damping (both
+/// laws); one in ten left out (holes the bands pad with springs of zero stiffness), one in
+/// fifty pushed twice (the second stays in rows), and a few long springs and a self spring that
+/// only rows can take; two particles on one spot (a zero-length spring in a band).
+fn grid_network(
+    seed: u64,
+    w: usize,
+    h: usize,
+    damped: bool,
+) -> (Springs, Vec<Vector>, Vec<Vector>) {
+    let mut r = Rng(seed);
+    let n = w * h;
+    let mut x: Vec<Vector> = (0..n)
+        .map(|p| {
+            let at = Vector::new((p % w) as Scalar * 0.02, (p / w) as Scalar * 0.02, 0.0);
+            at + random_vec(&mut r, 0.005)
+        })
+        .collect();
+    x[w + 1] = x[w];
+    let v: Vec<Vector> = (0..n).map(|_| random_vec(&mut r, 1.0)).collect();
+    let mut s = Springs::new();
+    let add = |r: &mut Rng, s: &mut Springs, i: usize, j: usize| {
+        let (i, j) = if r.unit() < 0.5 { (i, j) } else { (j, i) };
+        let law = if r.unit() < 0.3 {
+            SpringLaw::Strain
+        } else {
+            SpringLaw::Hooke
+        };
+        let damping = if damped { 0.5 * r.unit() } else { 0.0 };
+        let (rest, k) = (
+            (0.01 + 0.03 * r.unit()) as Scalar,
+            (10.0 + 1000.0 * r.unit()) as Scalar,
+        );
+        s.push(i, j, rest, k, damping as Scalar, law);
+    };
+    for p in 0..n {
+        let (c, row) = (p % w, p / w);
+        let mut pairs = vec![];
+        if c + 1 < w {
+            pairs.push(p + 1);
+        }
+        if c + 2 < w {
+            pairs.push(p + 2);
+        }
+        if row + 1 < h {
+            pairs.push(p + w);
+            if c + 1 < w {
+                pairs.push(p + w + 1);
+            }
+            if c > 0 {
+                pairs.push(p + w - 1);
+            }
+        }
+        if row + 2 < h {
+            pairs.push(p + 2 * w);
+        }
+        for q in pairs {
+            if r.unit() < 0.1 {
+                continue;
+            }
+            add(&mut r, &mut s, p, q);
+            if r.unit() < 0.02 {
+                add(&mut r, &mut s, p, q);
+            }
+        }
+    }
+    for _ in 0..100 {
+        let (i, j) = (r.below(n), r.below(n));
+        add(&mut r, &mut s, i, j);
+    }
+    s.push(5, 5, 0.1, 50.0, 0.2, SpringLaw::Hooke);
+    (s, x, v)
+}
+
+/// The band kernel (springs of a structured mesh by offset, in columns) together with the
+/// rows it leaves the rest to, against the one-loop reference; its energy against an f64 sum;
+/// and the same bits on one, two and three threads.
+#[test]
+fn band_kernel_equals_the_reference_to_round_off() {
+    for (seed, damped) in [(21, false), (22, true)] {
+        // 60×60: four chunks of both passes.
+        let (s, x, v) = grid_network(seed, 60, 60, damped);
+        let (all, banded) = (s.as_slice().len(), s.rows().in_bands());
+        println!("{banded} of {all} springs in bands");
+        assert!(
+            banded > 9 * all / 10 && banded < all,
+            "{banded} of {all} in bands"
+        );
+        assert!(s.rows().chunks() >= 3);
+        let mut fast = vec![Vector::ZERO; x.len()];
+        let mut reference = fast.clone();
+        s.accumulate(&x, &v, &mut fast);
+        s.accumulate_reference(&x, &v, &mut reference);
+        let err = worst(&fast, &reference, &spring_scale(&s, &x, &v));
+        println!("damped {damped}: worst |fast − reference| / S = {err:.2e}");
+        assert!(err <= 64.0 * EPS as f64, "{err:e}");
+        // Added into what `f` held, as the other forces are.
+        let mut twice = fast.clone();
+        s.accumulate(&x, &v, &mut twice);
+        let doubled: Vec<Vector> = fast.iter().map(|f| *f * 2.0).collect();
+        let err = worst(&twice, &doubled, &spring_scale(&s, &x, &v));
+        assert!(err <= 64.0 * EPS as f64, "accumulated: {err:e}");
+        let mut elastic = vec![Vector::ZERO; x.len()];
+        s.accumulate_elastic(&x, &mut elastic);
+        let mut undamped = s.clone();
+        for sp in undamped.as_mut_slice() {
+            sp.damping = 0.0;
+        }
+        undamped.refresh();
+        let mut reference = vec![Vector::ZERO; x.len()];
+        undamped.accumulate_reference(&x, &v, &mut reference);
+        let err = worst(&elastic, &reference, &spring_scale(&undamped, &x, &v));
+        assert!(err <= 64.0 * EPS as f64, "elastic: {err:e}");
+        // The energy the divergence guard reads, bands included (bound as in the row
+        // kernel's energy test).
+        let (mut exact, mut bound) = (0.0f64, 0.0f64);
+        for sp in s.as_slice().iter().filter(|sp| sp.i != sp.j) {
+            let (xi, xj) = (x[sp.i as usize].to_f64(), x[sp.j as usize].to_f64());
+            let l = DVec3::from_array(xi).distance(DVec3::from_array(xj));
+            let (k, rest) = (sp.k as f64, sp.rest as f64);
+            let e = l - rest;
+            exact += 0.5 * k * e * e;
+            bound += 4.0 * EPS as f64 * (k * e.abs() * (l + rest) + 0.5 * k * e * e);
+        }
+        let energy = s.energy_fast(&x);
+        assert!((energy - exact).abs() <= bound, "{energy} against {exact}");
+        #[cfg(feature = "parallel")]
+        {
+            use bevy_soft_body::core::kernels;
+            let bits = |a: &[Vector]| a.iter().map(|v| v.to_f64()).collect::<Vec<_>>();
+            for threads in [2, 3] {
+                let (f, e) = kernels::with_threads(threads, || {
+                    let mut f = vec![Vector::ZERO; x.len()];
+                    s.accumulate(&x, &v, &mut f);
+                    (f, s.energy_fast(&x))
+                });
+                assert_eq!(bits(&fast), bits(&f), "{threads} threads");
+                assert_eq!(energy.to_bits(), e.to_bits(), "{threads} threads");
+            }
+        }
+    }
+}
+
 #[test]
 fn row_kernel_survives_edits_and_small_bodies() {
     // One spring; then edits after the layout was built must be seen.

@@ -23,8 +23,14 @@
 //! and a thread gathers the slots its own force pass wrote: only the springs that reach into
 //! the next chunk pass their forces, and the positions they read, between cores.
 //!
+//! Springs that fall into bands (a structured mesh's: many springs with one offset between
+//! their particles) are taken by [`super::bands`] instead, in the same chunks and passes: its
+//! force pass runs with each chunk's rows, and each particle adds its bands' sums after its
+//! row sums.
+//!
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
+use super::bands::Bands;
 use super::{ChunkLists, SharedMut, for_each_range};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
@@ -116,6 +122,28 @@ pub struct SpringRows {
     reach: ChunkLists,
     /// Each chunk's part of a sum over the springs ([`Self::energy`]).
     partials: Mutex<Vec<f64>>,
+    /// The springs of a structured mesh in bands (see [`super::bands`]); the rows above hold
+    /// the others.
+    bands: Option<Bands>,
+    /// The bands' force columns and each chunk's scratch.
+    band_buf: Mutex<BandBuf>,
+}
+
+/// The buffers of the band kernel: its force columns, shared by the passes, and a scratch
+/// per chunk.
+#[derive(Debug, Default)]
+struct BandBuf {
+    columns: Vec<Scalar>,
+    scratch: Vec<Scalar>,
+}
+
+impl BandBuf {
+    fn new(bands: &Bands, chunks: usize) -> Self {
+        Self {
+            columns: vec![0.0; bands.buffer_len()],
+            scratch: vec![0.0; bands.scratch_len() * chunks],
+        }
+    }
 }
 
 impl SpringRows {
@@ -127,6 +155,19 @@ impl SpringRows {
             .map(|s| s.i.max(s.j) as usize + 1)
             .max()
             .unwrap_or(0);
+        let chunk = super::chunk_size(bound, CHUNK_PARTICLES);
+        // The upper ends of springs that reach from a chunk into another (by their lower
+        // particle), whichever kernel takes them.
+        let chunk_of = |p: u32| p as usize / chunk;
+        let crossing = || {
+            (springs.iter().filter(|s| s.i != s.j))
+                .map(|s| (s.i.min(s.j), s.i.max(s.j)))
+                .filter(|&(i, j)| chunk_of(i) != chunk_of(j))
+        };
+        let border = ChunkLists::new(crossing().map(|(_, j)| (chunk_of(j), j)));
+        let reach = ChunkLists::new(crossing().map(|(i, j)| (chunk_of(i), j)));
+        let (bands, others) = Bands::split(springs, bound, chunk);
+        let springs = &others[..];
         // Counting sort by the lower index, then by the upper within a row (stable).
         let mut row_start = vec![0u32; bound + 1];
         let mut upper_start = vec![0u32; bound + 1];
@@ -169,15 +210,6 @@ impl SpringRows {
             upper[next[c.j as usize] as usize] = s as u32;
             next[c.j as usize] += 1;
         }
-        // The upper ends of springs that reach from a chunk's rows into another chunk.
-        let chunk = super::chunk_size(bound, CHUNK_PARTICLES);
-        let chunk_of = |p: u32| p as usize / chunk;
-        let crossing = || {
-            (cols.iter().zip(&col_i).enumerate())
-                .filter(|(_, (c, i))| chunk_of(c.j) != chunk_of(**i))
-        };
-        let border = ChunkLists::new(crossing().map(|(_, (c, _))| (chunk_of(c.j), c.j)));
-        let reach = ChunkLists::new(crossing().map(|(_, (c, i))| (chunk_of(*i), c.j)));
 
         // Byte offsets: a load then takes no index arithmetic (the force pass's loop is bound
         // by the processor's vector ports and issue width, and each spring's four loads
@@ -205,7 +237,18 @@ impl SpringRows {
             border,
             reach,
             partials: Mutex::new(vec![0.0; bound.div_ceil(chunk)]),
+            band_buf: Mutex::new(
+                bands
+                    .as_ref()
+                    .map_or_else(BandBuf::default, |b| BandBuf::new(b, bound.div_ceil(chunk))),
+            ),
+            bands,
         }
+    }
+
+    /// Springs the band kernel takes (the rest are in rows).
+    pub fn in_bands(&self) -> usize {
+        self.bands.as_ref().map_or(0, Bands::len)
     }
 
     /// Number of chunks of the force pass (parallel work units).
@@ -219,11 +262,27 @@ impl SpringRows {
     /// `x`, `v` (when given) and `f` hold every particle any spring refers to.
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], v: Option<&[Vector]>, f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
+        let mut bands = self.band_buf.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
         unsafe {
-            self.force_pass(x, v, &mut guard);
-            super::gather_add(self, &guard, f);
+            self.force_pass(x, v, &mut guard, &mut bands);
+            match self.with_bands(&mut bands) {
+                Some(w) => super::gather_add(&w, &guard, f),
+                None => super::gather_add(self, &guard, f),
+            }
         }
+    }
+
+    /// The gather of the rows and the bands together, when there are bands.
+    fn with_bands<'a>(&'a self, buf: &'a mut BandBuf) -> Option<WithBands<'a>> {
+        let bands = self.bands.as_ref()?;
+        let BandBuf { columns, scratch } = buf;
+        Some(WithBands {
+            rows: self,
+            bands,
+            columns,
+            scratch: SharedMut(scratch.as_mut_ptr()),
+        })
     }
 
     /// Sets `f` to the spring forces (with the dampers' when `damped`), as if it were zeroed
@@ -241,10 +300,14 @@ impl SpringRows {
         finish: super::Finish<'_>,
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
+        let mut bands = self.band_buf.lock().unwrap_or_else(|e| e.into_inner());
         // SAFETY: as the caller guarantees.
         unsafe {
-            self.force_pass(x, damped.then_some(&*v), &mut guard);
-            super::gather_set_then(self, &guard, x, v, f, finish);
+            self.force_pass(x, damped.then_some(&*v), &mut guard, &mut bands);
+            match self.with_bands(&mut bands) {
+                Some(w) => super::gather_set_then(&w, &guard, x, v, f, finish),
+                None => super::gather_set_then(self, &guard, x, v, f, finish),
+            }
         }
     }
 
@@ -274,6 +337,9 @@ impl SpringRows {
                     sum += (0.5 * *self.k.get_unchecked(s) * e * e) as f64;
                 }
             }
+            if let Some(b) = &self.bands {
+                sum += b.energy(p0, p1, x);
+            }
             sum
         })
     }
@@ -287,8 +353,16 @@ impl SpringRows {
     ///
     /// # Safety
     /// `x` and `v` (when given) hold every particle any spring refers to.
-    unsafe fn force_pass(&self, x: &[Vector], v: Option<&[Vector]>, buf: &mut [Slot]) {
+    unsafe fn force_pass(
+        &self,
+        x: &[Vector],
+        v: Option<&[Vector]>,
+        buf: &mut [Slot],
+        bands: &mut BandBuf,
+    ) {
         let buf = SharedMut(buf.as_mut_ptr());
+        let columns = SharedMut(bands.columns.as_mut_ptr());
+        let scratch = SharedMut(bands.scratch.as_mut_ptr());
         // The f64 kernels broadcast lanes across the register's halves (AVX2).
         #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
         let avx = std::arch::is_x86_feature_detected!("avx");
@@ -316,6 +390,12 @@ impl SpringRows {
                     s = self.forces_avx(s, s1, x, v, buf.ptr());
                 }
                 self.forces(s, s1, x, v, buf.ptr());
+                // The bands' springs of the chunk's particles, into their columns (each chunk
+                // its own entries) through the chunk's own scratch.
+                if let Some(b) = &self.bands {
+                    let at = c.start / self.chunk * b.scratch_len();
+                    b.forces(c.start, c.end, x, v, columns.ptr(), scratch.ptr().add(at));
+                }
             }
         });
     }
@@ -688,6 +768,42 @@ impl SpringRows {
     }
 }
 
+/// The row kernel with its bands, as one gather: each particle's row sums first, then its
+/// bands'.
+struct WithBands<'a> {
+    rows: &'a SpringRows,
+    bands: &'a Bands,
+    columns: &'a [Scalar],
+    scratch: SharedMut<Scalar>,
+}
+
+impl super::Gather for WithBands<'_> {
+    type Slot = Slot;
+
+    fn bound(&self) -> usize {
+        self.rows.bound()
+    }
+
+    fn chunk(&self) -> usize {
+        self.rows.chunk
+    }
+
+    fn border(&self) -> &ChunkLists {
+        &self.rows.border
+    }
+
+    #[inline(always)]
+    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+        // SAFETY: as the caller guarantees; `p0` starts a chunk (the gathers hand over whole
+        // chunks), whose scratch this is.
+        unsafe {
+            <SpringRows as super::Gather>::gather_chunk(self.rows, p0, p1, buf, out, set);
+            let at = p0 / self.rows.chunk * self.bands.scratch_len();
+            (self.bands).gather(p0, p1, self.columns, self.scratch.ptr().add(at), out);
+        }
+    }
+}
+
 impl Clone for SpringRows {
     fn clone(&self) -> Self {
         let buffer = self
@@ -710,6 +826,12 @@ impl Clone for SpringRows {
             border: self.border.clone(),
             reach: self.reach.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
+            band_buf: Mutex::new(
+                self.bands
+                    .as_ref()
+                    .map_or_else(BandBuf::default, |b| BandBuf::new(b, self.chunks())),
+            ),
+            bands: self.bands.clone(),
         }
     }
 }

@@ -1,0 +1,513 @@
+//! Springs in bands: the springs of a structured mesh, evaluated on contiguous columns.
+//!
+//! A cloth built as a grid numbers its particles row by row, so its springs fall into a few
+//! *bands*: every spring of one kind joins a particle `i` to `i + o` for one offset `o` (a
+//! 64² grid: 1 and 64 structural, 63 and 65 shear, 2 and 128 bending). A band keeps its
+//! springs by their lower particle, one slot per `i` over its range (a missing spring is a
+//! slot of zero stiffness and damping: it exerts exactly nothing), so that
+//!
+//! 1. **Forces.** The positions (and velocities) of a chunk of particles and of the `omax`
+//!    after it are copied into columns (`x`, `y`, `z` apart); then, band after band, the
+//!    springs of the chunk's particles read `i` and `i + o` from the columns at consecutive
+//!    places, and every spring's force on `i` goes to the band's columns of forces, in the
+//!    order of `i`: straight loops the compiler turns into AVX lanes, with no index, no
+//!    shuffle and no transpose per spring. (The row kernel spends about 34 shuffles on every
+//!    eight springs turning `Vec3A` differences into columns and forces back into rows; those
+//!    bound it.)
+//! 2. **Gather.** Particle `p` adds, band after band, the force of the band's spring at `p`
+//!    and subtracts that of its spring at `p − o`: two contiguous reads per band, again in
+//!    lanes.
+//!
+//! Every lane does the scalar operations of [`SpringRows`](super::springs::SpringRows)'s
+//! loop (`c = k (L/l − 1) − b (n·v_r)/l`, no fused multiply-add), element by element, so the
+//! loops give the same bits whether the compiler made lanes of them or not, on any machine;
+//! each particle's sum has one order (its bands in order of offset), fixed by the layout, so
+//! the same bits on any number of threads. Springs that are not in a band (an offset with
+//! few springs, or a second spring between the same two particles) stay in the row kernel,
+//! which adds its sums before the bands'.
+
+use crate::core::forces::PackedSpring;
+use crate::math::{Scalar, Vector};
+use std::collections::BTreeMap;
+
+/// Fewest springs with one offset that make a band.
+pub const MIN_BAND: usize = 64;
+
+/// Largest offset a band may have (particles a chunk copies past its end).
+pub const MAX_OFFSET: u32 = 1024;
+
+/// One band: its offset, its range of lower particles `a..e`, where its parameters start
+/// in [`Bands`]'s arrays, and where its force column starts: `e − a + 2 o` entries, the
+/// force of its spring at `i` at `g + o + i − a`, zeros around, so that particle `p` (of
+/// `a..e + o`, the particles the band reaches) reads its two at `g + o + p − a` (as the lower
+/// particle) and `g + p − a` (as the upper).
+#[derive(Clone, Copy, Debug)]
+struct Band {
+    o: usize,
+    a: usize,
+    e: usize,
+    at: usize,
+    g: usize,
+}
+
+/// The bands of a set of springs (see the module docs).
+#[derive(Clone, Debug)]
+pub(crate) struct Bands {
+    band: Vec<Band>,
+    rest: Vec<Scalar>,
+    k: Vec<Scalar>,
+    damping: Vec<Scalar>,
+    /// Springs the bands hold (their slots less the empty ones).
+    springs: usize,
+    /// The largest offset.
+    omax: usize,
+    /// One more than the largest particle index.
+    bound: usize,
+    /// Length of one coordinate's force columns (all bands; see [`Band`]).
+    columns: usize,
+    /// Particles per chunk (the row kernel's).
+    chunk: usize,
+}
+
+impl Bands {
+    /// Splits `springs` into bands and the rest (springs joining a particle to itself go to
+    /// the rest, which leaves them out). `None` when no offset has [`MIN_BAND`] springs over
+    /// a range they fill at least half of.
+    pub(crate) fn split(
+        springs: &[PackedSpring],
+        bound: usize,
+        chunk: usize,
+    ) -> (Option<Self>, Vec<PackedSpring>) {
+        // Count, lowest and highest lower particle of each offset.
+        let mut stats: BTreeMap<u32, (usize, u32, u32)> = BTreeMap::new();
+        for s in springs.iter().filter(|s| s.i != s.j) {
+            let (lo, o) = (s.i.min(s.j), s.i.abs_diff(s.j));
+            if o > MAX_OFFSET {
+                continue;
+            }
+            let e = stats.entry(o).or_insert((0, lo, lo));
+            e.0 += 1;
+            e.1 = e.1.min(lo);
+            e.2 = e.2.max(lo);
+        }
+        let mut band = Vec::new();
+        let (mut at, mut g) = (0, 0);
+        for (&o, &(count, a, last)) in &stats {
+            let (o, a, e) = (o as usize, a as usize, last as usize + 1);
+            if count < MIN_BAND || 2 * count < e - a {
+                continue;
+            }
+            band.push(Band { o, a, e, at, g });
+            at += e - a;
+            g += e - a + 2 * o;
+        }
+        if band.is_empty() {
+            return (None, springs.to_vec());
+        }
+        let n = at;
+        let (mut rest, mut k, mut damping) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut taken = vec![false; n];
+        let which: BTreeMap<usize, usize> =
+            band.iter().enumerate().map(|(b, d)| (d.o, b)).collect();
+        let mut others = Vec::new();
+        for s in springs {
+            let (lo, o) = (s.i.min(s.j) as usize, s.i.abs_diff(s.j) as usize);
+            let slot = (s.i != s.j)
+                .then(|| which.get(&o))
+                .flatten()
+                .map(|&b| band[b].at + lo - band[b].a)
+                .filter(|&q| !taken[q]);
+            match slot {
+                Some(q) => {
+                    taken[q] = true;
+                    (rest[q], k[q], damping[q]) = (s.rest, s.k, s.damping);
+                }
+                None => others.push(*s),
+            }
+        }
+        let omax = band.iter().map(|b| b.o).max().unwrap_or(0);
+        let bands = Self {
+            band,
+            rest,
+            k,
+            damping,
+            springs: springs.len() - others.len(),
+            omax,
+            bound,
+            columns: g,
+            chunk,
+        };
+        (Some(bands), others)
+    }
+
+    /// Springs in bands.
+    pub(crate) fn len(&self) -> usize {
+        self.springs
+    }
+
+    /// Length of the force columns (all three coordinates) the passes share.
+    pub(crate) fn buffer_len(&self) -> usize {
+        3 * self.columns
+    }
+
+    /// Length of each chunk's scratch: the columns of positions and velocities of its
+    /// particles and the `omax` after them, and its sums.
+    pub(crate) fn scratch_len(&self) -> usize {
+        6 * (self.chunk + self.omax) + 3 * self.chunk
+    }
+
+    /// The force pass of chunk `c` (particles `p0..p1`): every band spring whose lower
+    /// particle is in the chunk, its force on that particle into the force columns `g`
+    /// (`buffer_len` long), with the dampers' when `v` is given.
+    ///
+    /// # Safety
+    /// `x` and `v` hold the bound's particles; `g` is the shared force columns, of which this
+    /// writes only the chunk's springs' entries; `scratch` is the chunk's own
+    /// (`scratch_len` long).
+    pub(crate) unsafe fn forces(
+        &self,
+        p0: usize,
+        p1: usize,
+        x: &[Vector],
+        v: Option<&[Vector]>,
+        g: *mut Scalar,
+        scratch: *mut Scalar,
+    ) {
+        let end = (p1 + self.omax).min(self.bound);
+        let m = end - p0;
+        let stride = self.chunk + self.omax;
+        // SAFETY: the scratch is the chunk's own and holds six columns of `stride ≥ m`.
+        let cols = |q: usize| unsafe { std::slice::from_raw_parts_mut(scratch.add(q * stride), m) };
+        let (xs, ys, zs) = (cols(0), cols(1), cols(2));
+        for (q, p) in x[p0..end].iter().enumerate() {
+            (xs[q], ys[q], zs[q]) = (p.x, p.y, p.z);
+        }
+        let (vx, vy, vz) = (cols(3), cols(4), cols(5));
+        if let Some(v) = v {
+            for (q, p) in v[p0..end].iter().enumerate() {
+                (vx[q], vy[q], vz[q]) = (p.x, p.y, p.z);
+            }
+        }
+        for b in &self.band {
+            let (lo0, lo1) = (b.a.max(p0), b.e.min(p1));
+            if lo0 >= lo1 {
+                continue;
+            }
+            let (len, o) = (lo1 - lo0, b.o);
+            let (i, j) = (lo0 - p0, lo0 - p0 + o);
+            let q = b.at + lo0 - b.a;
+            let at = b.g + o + lo0 - b.a;
+            // SAFETY: the three force columns of this band's springs `lo0..lo1`, written by
+            // this chunk alone.
+            let out = |c: usize| unsafe {
+                std::slice::from_raw_parts_mut(g.add(c * self.columns + at), len)
+            };
+            let p = Params {
+                rest: &self.rest[q..q + len],
+                k: &self.k[q..q + len],
+                damping: &self.damping[q..q + len],
+            };
+            let d = [
+                &xs[i..i + len],
+                &xs[j..j + len],
+                &ys[i..i + len],
+                &ys[j..j + len],
+            ];
+            let d = Ends {
+                xi: d[0],
+                xj: d[1],
+                yi: d[2],
+                yj: d[3],
+                zi: &zs[i..i + len],
+                zj: &zs[j..j + len],
+            };
+            let (fx, fy, fz) = (out(0), out(1), out(2));
+            if v.is_some() {
+                let w = Ends {
+                    xi: &vx[i..i + len],
+                    xj: &vx[j..j + len],
+                    yi: &vy[i..i + len],
+                    yj: &vy[j..j + len],
+                    zi: &vz[i..i + len],
+                    zj: &vz[j..j + len],
+                };
+                band_forces::<true>(&d, &w, &p, fx, fy, fz);
+            } else {
+                band_forces::<false>(&d, &d, &p, fx, fy, fz);
+            }
+        }
+    }
+
+    /// Adds the bands' forces on particles `p0..p1` (chunk `c`) into `out[p − p0]`, after
+    /// the row kernel's sums.
+    ///
+    /// # Safety
+    /// `g` is the force pass's columns (every chunk's done); `scratch` is the chunk's own;
+    /// `out` points to at least `p1 − p0` vectors; `p1 ≤` the bound.
+    pub(crate) unsafe fn gather(
+        &self,
+        p0: usize,
+        p1: usize,
+        g: &[Scalar],
+        scratch: *mut Scalar,
+        out: *mut Vector,
+    ) {
+        let m = p1 - p0;
+        let base = 6 * (self.chunk + self.omax);
+        // SAFETY: the chunk's three sum columns, `chunk ≥ m` long each.
+        let sums = |q: usize| unsafe {
+            std::slice::from_raw_parts_mut(scratch.add(base + q * self.chunk), m)
+        };
+        let (sx, sy, sz) = (sums(0), sums(1), sums(2));
+        sx.fill(0.0);
+        sy.fill(0.0);
+        sz.fill(0.0);
+        for b in &self.band {
+            // The particles the band reaches: `a..e + o`.
+            let (q0, q1) = (b.a.max(p0), (b.e + b.o).min(p1));
+            if q0 >= q1 {
+                continue;
+            }
+            let (from, len) = (b.g + q0 - b.a, q1 - q0);
+            for (c, s) in [&mut *sx, &mut *sy, &mut *sz].into_iter().enumerate() {
+                let col = &g[c * self.columns + from..c * self.columns + from + len + b.o];
+                add_band(&mut s[q0 - p0..q1 - p0], &col[b.o..], &col[..len]);
+            }
+        }
+        for (q, ((x, y), z)) in sx.iter().zip(&*sy).zip(&*sz).enumerate() {
+            // SAFETY: `q < m ≤` what `out` holds.
+            unsafe { *out.add(q) += Vector::new(*x, *y, *z) };
+        }
+    }
+
+    /// The bands' elastic energy over the springs whose lower particle is in `p0..p1`, each
+    /// spring's in the build's precision, summed in `f64`.
+    pub(crate) fn energy(&self, p0: usize, p1: usize, x: &[Vector]) -> f64 {
+        let mut sum = 0.0f64;
+        for b in &self.band {
+            for i in b.a.max(p0)..b.e.min(p1) {
+                let q = b.at + i - b.a;
+                if self.k[q] == 0.0 {
+                    continue;
+                }
+                let e = (x[i] - x[i + b.o]).length() - self.rest[q];
+                sum += (0.5 * self.k[q] * e * e) as f64;
+            }
+        }
+        sum
+    }
+}
+
+/// A band's springs' two ends, in columns.
+struct Ends<'a> {
+    xi: &'a [Scalar],
+    xj: &'a [Scalar],
+    yi: &'a [Scalar],
+    yj: &'a [Scalar],
+    zi: &'a [Scalar],
+    zj: &'a [Scalar],
+}
+
+/// A band's springs' parameters.
+struct Params<'a> {
+    rest: &'a [Scalar],
+    k: &'a [Scalar],
+    damping: &'a [Scalar],
+}
+
+/// The forces of a run of a band's springs: [`forces_in_lanes`] compiled for AVX where the
+/// processor has it (the same operations, element by element: the same bits).
+fn band_forces<const DAMPED: bool>(
+    d: &Ends,
+    w: &Ends,
+    p: &Params,
+    fx: &mut [Scalar],
+    fy: &mut [Scalar],
+    fz: &mut [Scalar],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present.
+        unsafe { forces_avx::<DAMPED>(d, w, p, fx, fy, fz) };
+        return;
+    }
+    forces_in_lanes::<DAMPED>(d, w, p, fx, fy, fz);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn forces_avx<const DAMPED: bool>(
+    d: &Ends,
+    w: &Ends,
+    p: &Params,
+    fx: &mut [Scalar],
+    fy: &mut [Scalar],
+    fz: &mut [Scalar],
+) {
+    forces_in_lanes::<DAMPED>(d, w, p, fx, fy, fz);
+}
+
+/// Each spring `t`: `d = x_i − x_j`, `l = |d|`, the factor `c` of the row kernel's scalar loop
+/// (the same operations in the same order), and the force `d c` into `(fx, fy, fz)[t]`.
+#[inline(always)]
+fn forces_in_lanes<const DAMPED: bool>(
+    d: &Ends,
+    w: &Ends,
+    p: &Params,
+    fx: &mut [Scalar],
+    fy: &mut [Scalar],
+    fz: &mut [Scalar],
+) {
+    let n = fx.len();
+    let (fy, fz) = (&mut fy[..n], &mut fz[..n]);
+    let (xi, xj, yi, yj, zi, zj) = (
+        &d.xi[..n],
+        &d.xj[..n],
+        &d.yi[..n],
+        &d.yj[..n],
+        &d.zi[..n],
+        &d.zj[..n],
+    );
+    let (rest, k, damping) = (&p.rest[..n], &p.k[..n], &p.damping[..n]);
+    let (wxi, wxj, wyi, wyj, wzi, wzj) = if DAMPED {
+        (
+            &w.xi[..n],
+            &w.xj[..n],
+            &w.yi[..n],
+            &w.yj[..n],
+            &w.zi[..n],
+            &w.zj[..n],
+        )
+    } else {
+        (xi, xj, yi, yj, zi, zj)
+    };
+    for t in 0..n {
+        let (dx, dy, dz) = (xi[t] - xj[t], yi[t] - yj[t], zi[t] - zj[t]);
+        let l = (dx * dx + dy * dy + dz * dz).sqrt();
+        let c = if DAMPED {
+            let inv = if l > 0.0 { 1.0 / l } else { 0.0 };
+            let (ux, uy, uz) = (wxi[t] - wxj[t], wyi[t] - wyj[t], wzi[t] - wzj[t]);
+            let along = (dx * ux + dy * uy + dz * uz) * inv;
+            (-k[t] * (l - rest[t]) - damping[t] * along) * inv
+        } else if l > 0.0 {
+            k[t] * (rest[t] / l - 1.0)
+        } else {
+            0.0
+        };
+        fx[t] = dx * c;
+        fy[t] = dy * c;
+        fz[t] = dz * c;
+    }
+}
+
+/// `s[t] += plus[t] − minus[t]`, compiled for AVX where the processor has it.
+fn add_band(s: &mut [Scalar], plus: &[Scalar], minus: &[Scalar]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present.
+        unsafe { add_avx(s, plus, minus) };
+        return;
+    }
+    add_in_lanes(s, plus, minus);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn add_avx(s: &mut [Scalar], plus: &[Scalar], minus: &[Scalar]) {
+    add_in_lanes(s, plus, minus);
+}
+
+#[inline(always)]
+fn add_in_lanes(s: &mut [Scalar], plus: &[Scalar], minus: &[Scalar]) {
+    let n = s.len();
+    let (plus, minus) = (&plus[..n], &minus[..n]);
+    for t in 0..n {
+        s[t] += plus[t] - minus[t];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The loops compiled for AVX give the bits of the same loops compiled without it: runs
+    /// of 1 to 37 springs (whole lanes and remainders), lengths from zero to large, damped and
+    /// not, and the band sums.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn lanes_give_the_bits_of_the_plain_loop() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as Scalar
+        };
+        for n in 1..=37 {
+            let mut col =
+                |scale: Scalar| -> Vec<Scalar> { (0..n).map(|_| scale * next()).collect() };
+            let (xi, xj, yi, yj, zi, mut zj) =
+                (col(1.0), col(1.0), col(1e-3), col(1e-3), col(1e3), col(1e3));
+            // A zero-length spring.
+            zj[0] = zi[0];
+            let (xs, ys) = (xj.clone(), yj.clone());
+            let d = Ends {
+                xi: &xi,
+                xj: if n > 1 { &xj } else { &xi },
+                yi: &yi,
+                yj: if n > 1 { &yj } else { &yi },
+                zi: &zi,
+                zj: &zj,
+            };
+            let (ui, uj, vi, vj, wi, wj) =
+                (col(1.0), col(1.0), col(1.0), col(1.0), col(1.0), col(1.0));
+            let w = Ends {
+                xi: &ui,
+                xj: &uj,
+                yi: &vi,
+                yj: &vj,
+                zi: &wi,
+                zj: &wj,
+            };
+            let (rest, k, damping) = (col(1.0), col(1e3), col(1.0));
+            let p = Params {
+                rest: &rest,
+                k: &k,
+                damping: &damping,
+            };
+            let bits = |a: &[Scalar]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            let run = |avx: bool, damped: bool| {
+                let (mut fx, mut fy, mut fz) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+                match (avx, damped) {
+                    // SAFETY: AVX is present (checked above).
+                    (true, true) => unsafe {
+                        forces_avx::<true>(&d, &w, &p, &mut fx, &mut fy, &mut fz)
+                    },
+                    (true, false) => unsafe {
+                        forces_avx::<false>(&d, &d, &p, &mut fx, &mut fy, &mut fz)
+                    },
+                    (false, true) => forces_in_lanes::<true>(&d, &w, &p, &mut fx, &mut fy, &mut fz),
+                    (false, false) => {
+                        forces_in_lanes::<false>(&d, &d, &p, &mut fx, &mut fy, &mut fz)
+                    }
+                }
+                [bits(&fx), bits(&fy), bits(&fz)]
+            };
+            for damped in [false, true] {
+                assert_eq!(
+                    run(true, damped),
+                    run(false, damped),
+                    "{n} springs, damped {damped}"
+                );
+            }
+            let (mut a, mut b) = (xs.clone(), xs.clone());
+            // SAFETY: AVX is present.
+            unsafe { add_avx(&mut a, &ys, &zj) };
+            add_in_lanes(&mut b, &ys, &zj);
+            assert_eq!(bits(&a), bits(&b), "{n} sums");
+        }
+    }
+}
