@@ -14,9 +14,12 @@
 //!    shuffle and no transpose per spring. (The row kernel spends about 34 shuffles on every
 //!    eight springs turning `Vec3A` differences into columns and forces back into rows; those
 //!    bound it.)
+//!    (The copy into columns is a 4×4 transpose per half register, eight `Vec3A`s at a time,
+//!    in the f32 build with AVX.)
 //! 2. **Gather.** Particle `p` adds, band after band, the force of the band's spring at `p`
-//!    and subtracts that of its spring at `p − o`: two contiguous reads per band, again in
-//!    lanes.
+//!    and subtracts that of its spring at `p − o`: two contiguous reads per band, eight
+//!    particles at a time with their sums in registers (f32 with AVX), turned back into
+//!    rows once per eight particles.
 //!
 //! Every lane does the scalar operations of [`SpringRows`](super::springs::SpringRows)'s
 //! loop (`c = k (L/l − 1) − b (n·v_r)/l`, no fused multiply-add), element by element, so the
@@ -179,14 +182,10 @@ impl Bands {
         // SAFETY: the scratch is the chunk's own and holds six columns of `stride ≥ m`.
         let cols = |q: usize| unsafe { std::slice::from_raw_parts_mut(scratch.add(q * stride), m) };
         let (xs, ys, zs) = (cols(0), cols(1), cols(2));
-        for (q, p) in x[p0..end].iter().enumerate() {
-            (xs[q], ys[q], zs[q]) = (p.x, p.y, p.z);
-        }
+        to_columns(&x[p0..end], xs, ys, zs);
         let (vx, vy, vz) = (cols(3), cols(4), cols(5));
         if let Some(v) = v {
-            for (q, p) in v[p0..end].iter().enumerate() {
-                (vx[q], vy[q], vz[q]) = (p.x, p.y, p.z);
-            }
+            to_columns(&v[p0..end], vx, vy, vz);
         }
         for b in &self.band {
             let (lo0, lo1) = (b.a.max(p0), b.e.min(p1));
@@ -252,6 +251,82 @@ impl Bands {
         scratch: *mut Scalar,
         out: *mut Vector,
     ) {
+        // Where every band reaches every particle, eight particles at a time in registers
+        // (f32 with AVX); elsewhere (and otherwise) through the sum columns. Both add the same
+        // terms in the same order.
+        #[allow(unused_mut)]
+        let (mut f0, mut f1) = (p0, p0);
+        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        if std::arch::is_x86_feature_detected!("avx") {
+            let lo = self.band.iter().map(|b| b.a).max().unwrap_or(0);
+            let hi = self.band.iter().map(|b| b.e + b.o).min().unwrap_or(0);
+            f0 = lo.clamp(p0, p1);
+            f1 = f0 + (hi.clamp(f0, p1) - f0) / 8 * 8;
+            // SAFETY: AVX is present; `p0 ≤ f0 ≤ f1 ≤ p1`, every band reaching `f0..f1`.
+            unsafe { self.gather_avx(f0, f1, g, out.add(f0 - p0)) };
+        }
+        // SAFETY: as the caller guarantees, on the two parts left.
+        unsafe {
+            self.gather_columns(p0, f0, g, scratch, out);
+            self.gather_columns(f1, p1, g, scratch, out.add(f1 - p0));
+        }
+    }
+
+    /// [`Self::gather`] of particles `p0..p1`, every band reaching all of them, eight at a
+    /// time: each band's two columns read and their difference added, band after band, in
+    /// registers; the sums turned to rows and added to `out`.
+    ///
+    /// # Safety
+    /// `p1 − p0` is a multiple of eight; `out` holds `p1 − p0` vectors; every band reaches
+    /// `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[target_feature(enable = "avx")]
+    unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
+        use std::arch::x86_64::*;
+        let c = self.columns;
+        let g = g.as_ptr();
+        for t in (p0..p1).step_by(8) {
+            let mut s = [_mm256_setzero_ps(); 3];
+            for b in &self.band {
+                // SAFETY: `a ≤ t` and `t + 8 ≤ e + o`: both reads within the band's column.
+                unsafe {
+                    let minus = g.add(b.g + t - b.a);
+                    let plus = minus.add(b.o);
+                    for (k, s) in s.iter_mut().enumerate() {
+                        let d = _mm256_sub_ps(
+                            _mm256_loadu_ps(plus.add(k * c)),
+                            _mm256_loadu_ps(minus.add(k * c)),
+                        );
+                        *s = _mm256_add_ps(*s, d);
+                    }
+                }
+            }
+            let rows = super::avx::rows(s[0], s[1], s[2]);
+            for (q, row) in rows.into_iter().enumerate() {
+                // SAFETY: `t − p0 + q < p1 − p0`.
+                unsafe {
+                    let o = out.add(t - p0 + q) as *mut __m128;
+                    *o = _mm_add_ps(*o, row);
+                }
+            }
+        }
+    }
+
+    /// [`Self::gather`] of particles `p0..p1` through the chunk's sum columns.
+    ///
+    /// # Safety
+    /// As for [`Self::gather`], `out` pointing at particle `p0`'s force.
+    unsafe fn gather_columns(
+        &self,
+        p0: usize,
+        p1: usize,
+        g: &[Scalar],
+        scratch: *mut Scalar,
+        out: *mut Vector,
+    ) {
+        if p0 >= p1 {
+            return;
+        }
         let m = p1 - p0;
         let base = 6 * (self.chunk + self.omax);
         // SAFETY: the chunk's three sum columns, `chunk ≥ m` long each.
@@ -296,6 +371,41 @@ impl Bands {
         }
         sum
     }
+}
+
+/// Copies vectors into three columns (exact: the same bits however it is done); eight
+/// `Vec3A`s at a time with AVX in the f32 build (a 4×4 transpose per half of a register).
+fn to_columns(a: &[Vector], xs: &mut [Scalar], ys: &mut [Scalar], zs: &mut [Scalar]) {
+    #[allow(unused_mut)]
+    let mut done = 0;
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: AVX is present.
+        done = unsafe { to_columns_avx(a, xs, ys, zs) };
+    }
+    for (q, p) in a.iter().enumerate().skip(done) {
+        (xs[q], ys[q], zs[q]) = (p.x, p.y, p.z);
+    }
+}
+
+/// [`to_columns`]'s whole groups of eight; returns how many it copied.
+#[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+#[target_feature(enable = "avx")]
+fn to_columns_avx(a: &[Vector], xs: &mut [Scalar], ys: &mut [Scalar], zs: &mut [Scalar]) -> usize {
+    use std::arch::x86_64::*;
+    let n = a.len() / 8 * 8;
+    let (xs, ys, zs) = (&mut xs[..n], &mut ys[..n], &mut zs[..n]);
+    for q in (0..n).step_by(8) {
+        let rows: [__m128; 8] = std::array::from_fn(|k| a[q + k].into());
+        let [x, y, z, _] = super::avx::columns(&rows);
+        // SAFETY: `q + 8 ≤ n`, the columns' length.
+        unsafe {
+            _mm256_storeu_ps(xs.as_mut_ptr().add(q), x);
+            _mm256_storeu_ps(ys.as_mut_ptr().add(q), y);
+            _mm256_storeu_ps(zs.as_mut_ptr().add(q), z);
+        }
+    }
+    n
 }
 
 /// A band's springs' two ends, in columns.
@@ -509,5 +619,57 @@ mod tests {
             add_in_lanes(&mut b, &ys, &zj);
             assert_eq!(bits(&a), bits(&b), "{n} sums");
         }
+    }
+
+    /// The gather in registers gives the bits of the gather through the sum columns: a 20×20
+    /// grid's six bands with arbitrary force columns, summed both ways.
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[test]
+    fn gather_in_registers_gives_the_bits_of_the_columns() {
+        if !std::arch::is_x86_feature_detected!("avx") {
+            return;
+        }
+        let w = 20u32;
+        let mut springs = Vec::new();
+        for p in 0..w * w {
+            for o in [1, 2, w - 1, w, w + 1, 2 * w] {
+                if p + o < w * w {
+                    springs.push(PackedSpring {
+                        i: p + o,
+                        j: p,
+                        rest: 0.1,
+                        k: 10.0,
+                        damping: 0.0,
+                    });
+                }
+            }
+        }
+        let n = (w * w) as usize;
+        let (bands, rest) = Bands::split(&springs, n, n);
+        let bands = bands.expect("a grid has bands");
+        assert!(rest.is_empty() && bands.band.len() == 6);
+        let mut seed = 3u64;
+        let g: Vec<Scalar> = (0..bands.buffer_len())
+            .map(|_| {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((seed >> 40) as Scalar / (1u64 << 24) as Scalar - 0.5) * 100.0
+            })
+            .collect();
+        let mut scratch = vec![0.0; bands.scratch_len()];
+        let start: Vec<Vector> = (0..n).map(|p| Vector::splat(p as Scalar * 0.25)).collect();
+        let (mut fast, mut plain) = (start.clone(), start);
+        // SAFETY: the scratch and outputs are the chunk's (all `n` particles).
+        unsafe {
+            bands.gather(0, n, &g, scratch.as_mut_ptr(), fast.as_mut_ptr());
+            bands.gather_columns(0, n, &g, scratch.as_mut_ptr(), plain.as_mut_ptr());
+        }
+        let bits = |a: &[Vector]| {
+            a.iter()
+                .map(|v| v.to_array().map(f32::to_bits))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(bits(&fast), bits(&plain));
     }
 }
