@@ -797,7 +797,12 @@ impl super::Gather for WithBands<'_> {
         // SAFETY: as the caller guarantees; `p0` starts a chunk (the gathers hand over whole
         // chunks), whose scratch this is.
         unsafe {
-            <SpringRows as super::Gather>::gather_chunk(self.rows, p0, p1, buf, out, set);
+            if !self.rows.k.is_empty() {
+                <SpringRows as super::Gather>::gather_chunk(self.rows, p0, p1, buf, out, set);
+            } else if set {
+                // Every spring is in a band (a plain grid): nothing to sum by rows.
+                std::slice::from_raw_parts_mut(out, p1 - p0).fill(Vector::ZERO);
+            }
             let at = p0 / self.rows.chunk * self.bands.scratch_len();
             (self.bands).gather(p0, p1, self.columns, self.scratch.ptr().add(at), out);
         }
