@@ -89,26 +89,37 @@ fn row_kernel_equals_the_reference_to_round_off() {
         // 3000 particles: three chunks of both passes (20,000 springs).
         let (s, x, v) = network(seed, 3000, 20_000, damped);
         assert!(s.rows().chunks() >= 3, "{} chunks", s.rows().chunks());
-        let mut fast = vec![Vector::ZERO; x.len()];
-        let mut reference = fast.clone();
-        s.accumulate(&x, &v, &mut fast);
-        s.accumulate_reference(&x, &v, &mut reference);
-        let err = worst(&fast, &reference, &spring_scale(&s, &x, &v));
-        println!("damped {damped}: worst |fast − reference| / S = {err:.2e}");
-        assert!(err <= 64.0 * EPS as f64, "{err:e}");
-        // The elastic part alone (implicit methods) against the undamped reference.
-        let mut elastic = vec![Vector::ZERO; x.len()];
-        s.accumulate_elastic(&x, &mut elastic);
-        let mut undamped = s.clone();
-        for sp in undamped.as_mut_slice() {
-            sp.damping = 0.0;
-        }
-        undamped.refresh();
-        let mut reference = vec![Vector::ZERO; x.len()];
-        undamped.accumulate_reference(&x, &v, &mut reference);
-        let err = worst(&elastic, &reference, &spring_scale(&undamped, &x, &v));
-        assert!(err <= 64.0 * EPS as f64, "elastic: {err:e}");
+        forces_match_the_reference(&s, &x, &v, damped);
     }
+}
+
+/// The fast kernel's forces (all, and the elastic part alone that implicit methods take)
+/// against the one-loop reference, within `64 u S`; returns the forces.
+fn forces_match_the_reference(
+    s: &Springs,
+    x: &[Vector],
+    v: &[Vector],
+    damped: bool,
+) -> Vec<Vector> {
+    let mut fast = vec![Vector::ZERO; x.len()];
+    let mut reference = fast.clone();
+    s.accumulate(x, v, &mut fast);
+    s.accumulate_reference(x, v, &mut reference);
+    let err = worst(&fast, &reference, &spring_scale(s, x, v));
+    println!("damped {damped}: worst |fast − reference| / S = {err:.2e}");
+    assert!(err <= 64.0 * EPS as f64, "{err:e}");
+    let mut elastic = vec![Vector::ZERO; x.len()];
+    s.accumulate_elastic(x, &mut elastic);
+    let mut undamped = s.clone();
+    for sp in undamped.as_mut_slice() {
+        sp.damping = 0.0;
+    }
+    undamped.refresh();
+    let mut reference = vec![Vector::ZERO; x.len()];
+    undamped.accumulate_reference(x, v, &mut reference);
+    let err = worst(&elastic, &reference, &spring_scale(&undamped, x, v));
+    assert!(err <= 64.0 * EPS as f64, "elastic: {err:e}");
+    fast
 }
 
 /// A structured cloth: a `w × h` grid (2 cm, jittered by up to 5 mm, moving at up to 1 m/s)
@@ -202,30 +213,13 @@ fn band_kernel_equals_the_reference_to_round_off() {
             "{banded} of {all} in bands"
         );
         assert!(s.rows().chunks() >= 3);
-        let mut fast = vec![Vector::ZERO; x.len()];
-        let mut reference = fast.clone();
-        s.accumulate(&x, &v, &mut fast);
-        s.accumulate_reference(&x, &v, &mut reference);
-        let err = worst(&fast, &reference, &spring_scale(&s, &x, &v));
-        println!("damped {damped}: worst |fast − reference| / S = {err:.2e}");
-        assert!(err <= 64.0 * EPS as f64, "{err:e}");
+        let fast = forces_match_the_reference(&s, &x, &v, damped);
         // Added into what `f` held, as the other forces are.
         let mut twice = fast.clone();
         s.accumulate(&x, &v, &mut twice);
         let doubled: Vec<Vector> = fast.iter().map(|f| *f * 2.0).collect();
         let err = worst(&twice, &doubled, &spring_scale(&s, &x, &v));
         assert!(err <= 64.0 * EPS as f64, "accumulated: {err:e}");
-        let mut elastic = vec![Vector::ZERO; x.len()];
-        s.accumulate_elastic(&x, &mut elastic);
-        let mut undamped = s.clone();
-        for sp in undamped.as_mut_slice() {
-            sp.damping = 0.0;
-        }
-        undamped.refresh();
-        let mut reference = vec![Vector::ZERO; x.len()];
-        undamped.accumulate_reference(&x, &v, &mut reference);
-        let err = worst(&elastic, &reference, &spring_scale(&undamped, &x, &v));
-        assert!(err <= 64.0 * EPS as f64, "elastic: {err:e}");
         // The energy the divergence guard reads, bands included (bound as in the row
         // kernel's energy test).
         let (mut exact, mut bound) = (0.0f64, 0.0f64);
