@@ -222,15 +222,7 @@ fn band_kernel_equals_the_reference_to_round_off() {
         assert!(err <= 64.0 * EPS as f64, "accumulated: {err:e}");
         // The energy the divergence guard reads, bands included (bound as in the row
         // kernel's energy test).
-        let (mut exact, mut bound) = (0.0f64, 0.0f64);
-        for sp in s.as_slice().iter().filter(|sp| sp.i != sp.j) {
-            let (xi, xj) = (x[sp.i as usize].to_f64(), x[sp.j as usize].to_f64());
-            let l = DVec3::from_array(xi).distance(DVec3::from_array(xj));
-            let (k, rest) = (sp.k as f64, sp.rest as f64);
-            let e = l - rest;
-            exact += 0.5 * k * e * e;
-            bound += 4.0 * EPS as f64 * (k * e.abs() * (l + rest) + 0.5 * k * e * e);
-        }
+        let (exact, bound) = spring_energy_f64(&s, &x);
         let energy = s.energy_fast(&x);
         assert!((energy - exact).abs() <= bound, "{energy} against {exact}");
         #[cfg(feature = "parallel")]
@@ -376,6 +368,23 @@ fn tet_energy_equals_the_f64_reference_to_round_off() {
     }
 }
 
+/// The springs' elastic energy summed in f64 from f64 positions, and its round-off bound for
+/// the kernel's sum (see [`spring_energy_equals_the_f64_sum_to_round_off`]). A spring from a
+/// particle to itself exerts nothing and stores nothing the motion can change: the kernel
+/// leaves it out (the reference `energy` counts its constant ½ k L²), and so does this.
+fn spring_energy_f64(s: &Springs, x: &[Vector]) -> (f64, f64) {
+    let (mut exact, mut bound) = (0.0f64, 0.0f64);
+    for sp in s.as_slice().iter().filter(|sp| sp.i != sp.j) {
+        let (xi, xj) = (x[sp.i as usize].to_f64(), x[sp.j as usize].to_f64());
+        let l = DVec3::from_array(xi).distance(DVec3::from_array(xj));
+        let (k, rest) = (sp.k as f64, sp.rest as f64);
+        let e = l - rest;
+        exact += 0.5 * k * e * e;
+        bound += 4.0 * EPS as f64 * (k * e.abs() * (l + rest) + 0.5 * k * e * e);
+    }
+    (exact, bound)
+}
+
 /// The springs' energy from the fast kernel (each spring's in the build's precision, summed in
 /// f64 by chunk) against the same sum in f64 from f64 positions. A spring's term `½ k e²` with
 /// `e = l − L` carries the error of `l` and of the subtraction, about `(l + L)·EPS` in `e`, so
@@ -386,17 +395,7 @@ fn tet_energy_equals_the_f64_reference_to_round_off() {
 fn spring_energy_equals_the_f64_sum_to_round_off() {
     for (seed, n, m) in [(11, 3000, 20_000), (12, 300, 2000)] {
         let (s, x, _) = network(seed, n, m, false);
-        let (mut exact, mut bound) = (0.0f64, 0.0f64);
-        // A spring from a particle to itself exerts nothing and stores nothing the motion can
-        // change: the kernel leaves it out (the reference `energy` counts its constant ½ k L²).
-        for sp in s.as_slice().iter().filter(|sp| sp.i != sp.j) {
-            let (xi, xj) = (x[sp.i as usize].to_f64(), x[sp.j as usize].to_f64());
-            let l = DVec3::from_array(xi).distance(DVec3::from_array(xj));
-            let (k, rest) = (sp.k as f64, sp.rest as f64);
-            let e = l - rest;
-            exact += 0.5 * k * e * e;
-            bound += 4.0 * EPS as f64 * (k * e.abs() * (l + rest) + 0.5 * k * e * e);
-        }
+        let (exact, bound) = spring_energy_f64(&s, &x);
         let fast = s.energy_fast(&x);
         println!(
             "{n} particles: fast {fast:.9e} J, f64 {exact:.9e} J, |difference| {:.2e} (bound {bound:.2e})",

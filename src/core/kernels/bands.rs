@@ -70,6 +70,10 @@ pub(crate) struct Bands {
     columns: usize,
     /// Particles per chunk (the row kernel's).
     chunk: usize,
+    /// The particles every band reaches (each band reaches `a..e + o`): where the gather
+    /// may read every band's two columns without a check (the f32 build's AVX gather).
+    #[cfg_attr(any(feature = "f64", not(target_arch = "x86_64")), allow(dead_code))]
+    common: std::ops::Range<usize>,
 }
 
 impl Bands {
@@ -129,6 +133,8 @@ impl Bands {
             }
         }
         let omax = band.iter().map(|b| b.o).max().unwrap_or(0);
+        let common = band.iter().map(|b| b.a).max().unwrap_or(0)
+            ..band.iter().map(|b| b.e + b.o).min().unwrap_or(0);
         let bands = Self {
             band,
             rest,
@@ -139,6 +145,7 @@ impl Bands {
             bound,
             columns: g,
             chunk,
+            common,
         };
         (Some(bands), others)
     }
@@ -159,7 +166,7 @@ impl Bands {
         6 * (self.chunk + self.omax) + 3 * self.chunk
     }
 
-    /// The force pass of chunk `c` (particles `p0..p1`): every band spring whose lower
+    /// The force pass of the chunk of particles `p0..p1`: every band spring whose lower
     /// particle is in the chunk, its force on that particle into the force columns `g`
     /// (`buffer_len` long), with the dampers' when `v` is given.
     ///
@@ -206,30 +213,10 @@ impl Bands {
                 k: &self.k[q..q + len],
                 damping: &self.damping[q..q + len],
             };
-            let d = [
-                &xs[i..i + len],
-                &xs[j..j + len],
-                &ys[i..i + len],
-                &ys[j..j + len],
-            ];
-            let d = Ends {
-                xi: d[0],
-                xj: d[1],
-                yi: d[2],
-                yj: d[3],
-                zi: &zs[i..i + len],
-                zj: &zs[j..j + len],
-            };
+            let d = Ends::at([&*xs, &*ys, &*zs], i, j, len);
             let (fx, fy, fz) = (out(0), out(1), out(2));
             if v.is_some() {
-                let w = Ends {
-                    xi: &vx[i..i + len],
-                    xj: &vx[j..j + len],
-                    yi: &vy[i..i + len],
-                    yj: &vy[j..j + len],
-                    zi: &vz[i..i + len],
-                    zj: &vz[j..j + len],
-                };
+                let w = Ends::at([&*vx, &*vy, &*vz], i, j, len);
                 band_forces::<true>(&d, &w, &p, fx, fy, fz);
             } else {
                 band_forces::<false>(&d, &d, &p, fx, fy, fz);
@@ -237,7 +224,7 @@ impl Bands {
         }
     }
 
-    /// Adds the bands' forces on particles `p0..p1` (chunk `c`) into `out[p − p0]`, after
+    /// Adds the bands' forces on the chunk's particles `p0..p1` into `out[p − p0]`, after
     /// the row kernel's sums.
     ///
     /// # Safety
@@ -258,10 +245,8 @@ impl Bands {
         let (mut f0, mut f1) = (p0, p0);
         #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
         if std::arch::is_x86_feature_detected!("avx") {
-            let lo = self.band.iter().map(|b| b.a).max().unwrap_or(0);
-            let hi = self.band.iter().map(|b| b.e + b.o).min().unwrap_or(0);
-            f0 = lo.clamp(p0, p1);
-            f1 = f0 + (hi.clamp(f0, p1) - f0) / 8 * 8;
+            f0 = self.common.start.clamp(p0, p1);
+            f1 = f0 + (self.common.end.clamp(f0, p1) - f0) / 8 * 8;
             // SAFETY: AVX is present; `p0 ≤ f0 ≤ f1 ≤ p1`, every band reaching `f0..f1`.
             unsafe { self.gather_avx(f0, f1, g, out.add(f0 - p0)) };
         }
@@ -444,6 +429,20 @@ struct Ends<'a> {
     yj: &'a [Scalar],
     zi: &'a [Scalar],
     zj: &'a [Scalar],
+}
+
+impl<'a> Ends<'a> {
+    /// The `len` springs whose ends are at `i..` and `j..` of the columns `[x, y, z]`.
+    fn at(c: [&'a [Scalar]; 3], i: usize, j: usize, len: usize) -> Self {
+        Self {
+            xi: &c[0][i..i + len],
+            xj: &c[0][j..j + len],
+            yi: &c[1][i..i + len],
+            yj: &c[1][j..j + len],
+            zi: &c[2][i..i + len],
+            zj: &c[2][j..j + len],
+        }
+    }
 }
 
 /// A band's springs' parameters.

@@ -14,8 +14,9 @@
 //! a tet's on its four) into its own slots, several elements at a time in AVX lanes where the
 //! processor has it; then every particle sums its slots in a fixed order. [`springs`] keeps
 //! springs in rows by their lower particle index, so a particle's own row is contiguous,
-//! and hands the springs of a structured mesh (a grid's, which fall into a few offsets between
-//! their particles) to [`bands`], which evaluates them on contiguous columns; [`tets`] evaluates neo-Hookean elements in the build's precision with their rest shapes
+//! and hands the springs of a structured mesh (a grid's, which fall into a few offsets
+//! between their particles) to [`bands`], which evaluates them on contiguous columns;
+//! [`tets`] evaluates neo-Hookean elements in the build's precision with their rest shapes
 //! precomputed. [`sweep`] is symplectic Euler's update of every particle, in whole registers
 //! in the f64 build.
 

@@ -138,11 +138,12 @@ struct BandBuf {
 }
 
 impl BandBuf {
-    fn new(bands: &Bands, chunks: usize) -> Self {
-        Self {
-            columns: vec![0.0; bands.buffer_len()],
-            scratch: vec![0.0; bands.scratch_len() * chunks],
-        }
+    /// The buffers `bands` (if any) need over `chunks` chunks.
+    fn for_bands(bands: Option<&Bands>, chunks: usize) -> Mutex<Self> {
+        Mutex::new(bands.map_or_else(Self::default, |b| Self {
+            columns: vec![0.0; b.buffer_len()],
+            scratch: vec![0.0; b.scratch_len() * chunks],
+        }))
     }
 }
 
@@ -237,11 +238,7 @@ impl SpringRows {
             border,
             reach,
             partials: Mutex::new(vec![0.0; bound.div_ceil(chunk)]),
-            band_buf: Mutex::new(
-                bands
-                    .as_ref()
-                    .map_or_else(BandBuf::default, |b| BandBuf::new(b, bound.div_ceil(chunk))),
-            ),
+            band_buf: BandBuf::for_bands(bands.as_ref(), bound.div_ceil(chunk)),
             bands,
         }
     }
@@ -831,11 +828,7 @@ impl Clone for SpringRows {
             border: self.border.clone(),
             reach: self.reach.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
-            band_buf: Mutex::new(
-                self.bands
-                    .as_ref()
-                    .map_or_else(BandBuf::default, |b| BandBuf::new(b, self.chunks())),
-            ),
+            band_buf: BandBuf::for_bands(self.bands.as_ref(), self.chunks()),
             bands: self.bands.clone(),
         }
     }
