@@ -33,6 +33,10 @@ use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::collections::BTreeMap;
 
+/// Particles the register gather takes at a time: one AVX register of the build's scalars.
+#[cfg(target_arch = "x86_64")]
+const LANES: usize = 32 / std::mem::size_of::<Scalar>();
+
 /// Fewest springs with one offset that make a band.
 pub const MIN_BAND: usize = 64;
 
@@ -238,15 +242,15 @@ impl Bands {
         scratch: *mut Scalar,
         out: *mut Vector,
     ) {
-        // Where every band reaches every particle, eight particles at a time in registers
-        // (f32 with AVX); elsewhere (and otherwise) through the sum columns. Both add the same
-        // terms in the same order.
+        // Where every band reaches every particle, a register's width of particles at a time
+        // in registers (with AVX: eight in f32, four in f64); elsewhere (and otherwise)
+        // through the sum columns. Both add the same terms in the same order.
         #[allow(unused_mut)]
         let (mut f0, mut f1) = (p0, p0);
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+        #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx") {
             f0 = self.common.start.clamp(p0, p1);
-            f1 = f0 + (self.common.end.clamp(f0, p1) - f0) / 8 * 8;
+            f1 = f0 + (self.common.end.clamp(f0, p1) - f0) / LANES * LANES;
             // SAFETY: AVX is present; `p0 ≤ f0 ≤ f1 ≤ p1`, every band reaching `f0..f1`.
             unsafe { self.gather_avx(f0, f1, g, out.add(f0 - p0)) };
         }
@@ -257,13 +261,55 @@ impl Bands {
         }
     }
 
-    /// [`Self::gather`] of particles `p0..p1`, every band reaching all of them, eight at a
-    /// time: each band's two columns read and their difference added, band after band, in
+    /// [`Self::gather`] of particles `p0..p1`, every band reaching all of them, [`LANES`] at
+    /// a time: each band's two columns read and their difference added, band after band, in
     /// registers; the sums turned to rows and added to `out`.
     ///
     /// # Safety
-    /// `p1 − p0` is a multiple of eight; `out` holds `p1 − p0` vectors; every band reaches
-    /// `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
+    /// `p1 − p0` is a multiple of [`LANES`]; `out` holds `p1 − p0` vectors; every band
+    /// reaches `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
+    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+    #[target_feature(enable = "avx")]
+    unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
+        use std::arch::x86_64::*;
+        let c = self.columns;
+        let g = g.as_ptr();
+        for t in (p0..p1).step_by(4) {
+            let mut s = [_mm256_setzero_pd(); 3];
+            for b in &self.band {
+                // SAFETY: `a ≤ t` and `t + 4 ≤ e + o`: both reads within the band's column.
+                unsafe {
+                    let minus = g.add(b.g + t - b.a);
+                    let plus = minus.add(b.o);
+                    for (k, s) in s.iter_mut().enumerate() {
+                        let d = _mm256_sub_pd(
+                            _mm256_loadu_pd(plus.add(k * c)),
+                            _mm256_loadu_pd(minus.add(k * c)),
+                        );
+                        *s = _mm256_add_pd(*s, d);
+                    }
+                }
+            }
+            let rows = super::avx::rows3(s[0], s[1], s[2]);
+            // SAFETY: `DVec3` is three packed `f64`s; particles `t − p0..t − p0 + 4` are in
+            // `out`.
+            unsafe {
+                let o = out.add(t - p0) as *mut f64;
+                for (k, row) in rows.into_iter().enumerate() {
+                    let o = o.add(4 * k);
+                    _mm256_storeu_pd(o, _mm256_add_pd(_mm256_loadu_pd(o), row));
+                }
+            }
+        }
+    }
+
+    /// [`Self::gather`] of particles `p0..p1`, every band reaching all of them, [`LANES`] at
+    /// a time: each band's two columns read and their difference added, band after band, in
+    /// registers; the sums turned to rows and added to `out`.
+    ///
+    /// # Safety
+    /// `p1 − p0` is a multiple of [`LANES`]; `out` holds `p1 − p0` vectors; every band
+    /// reaches `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
     #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
     #[target_feature(enable = "avx")]
     unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
@@ -410,12 +456,10 @@ fn to_columns_avx(a: &[Vector], xs: &mut [Scalar], ys: &mut [Scalar], zs: &mut [
             let r0 = _mm256_loadu_pd(flat.add(3 * q));
             let r1 = _mm256_loadu_pd(flat.add(3 * q + 4));
             let r2 = _mm256_loadu_pd(flat.add(3 * q + 8));
-            let u0 = _mm256_permute2f128_pd::<0x30>(r0, r1); // x₀ y₀ x₂ y₂
-            let u1 = _mm256_permute2f128_pd::<0x21>(r0, r2); // z₀ x₁ z₂ x₃
-            let u2 = _mm256_permute2f128_pd::<0x30>(r1, r2); // y₁ z₁ y₃ z₃
-            _mm256_storeu_pd(xs.as_mut_ptr().add(q), _mm256_blend_pd::<0b1010>(u0, u1));
-            _mm256_storeu_pd(ys.as_mut_ptr().add(q), _mm256_shuffle_pd::<0b0101>(u0, u2));
-            _mm256_storeu_pd(zs.as_mut_ptr().add(q), _mm256_blend_pd::<0b1010>(u1, u2));
+            let [x, y, z] = super::avx::columns3(r0, r1, r2);
+            _mm256_storeu_pd(xs.as_mut_ptr().add(q), x);
+            _mm256_storeu_pd(ys.as_mut_ptr().add(q), y);
+            _mm256_storeu_pd(zs.as_mut_ptr().add(q), z);
         }
     }
     n
@@ -669,7 +713,7 @@ mod tests {
 
     /// The gather in registers gives the bits of the gather through the sum columns: a 20×20
     /// grid's six bands with arbitrary force columns, summed both ways.
-    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    #[cfg(target_arch = "x86_64")]
     #[test]
     fn gather_in_registers_gives_the_bits_of_the_columns() {
         if !std::arch::is_x86_feature_detected!("avx") {
@@ -704,7 +748,12 @@ mod tests {
             })
             .collect();
         let mut scratch = vec![0.0; bands.scratch_len()];
-        let start: Vec<Vector> = (0..n).map(|p| Vector::splat(p as Scalar * 0.25)).collect();
+        let start: Vec<Vector> = (0..n)
+            .map(|p| {
+                let p = p as Scalar;
+                Vector::new(p * 0.25, -p * 0.5, p + 0.125)
+            })
+            .collect();
         let (mut fast, mut plain) = (start.clone(), start);
         // SAFETY: the scratch and outputs are the chunk's (all `n` particles).
         unsafe {
@@ -713,7 +762,7 @@ mod tests {
         }
         let bits = |a: &[Vector]| {
             a.iter()
-                .map(|v| v.to_array().map(f32::to_bits))
+                .map(|v| v.to_array().map(Scalar::to_bits))
                 .collect::<Vec<_>>()
         };
         assert_eq!(bits(&fast), bits(&plain));

@@ -93,6 +93,35 @@ pub(crate) mod avx {
             _mm256_permute2f128_pd::<0x31>(t1, t3),
         ]
     }
+
+    /// Four packed `DVec3`s (twelve `f64`s in three registers: `x₀y₀z₀x₁`, `y₁z₁x₂y₂`,
+    /// `z₂x₃y₃z₃`) to their three columns (x, y, z).
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn columns3(r0: __m256d, r1: __m256d, r2: __m256d) -> [__m256d; 3] {
+        let u0 = _mm256_permute2f128_pd::<0x30>(r0, r1); // x₀ y₀ x₂ y₂
+        let u1 = _mm256_permute2f128_pd::<0x21>(r0, r2); // z₀ x₁ z₂ x₃
+        let u2 = _mm256_permute2f128_pd::<0x30>(r1, r2); // y₁ z₁ y₃ z₃
+        [
+            _mm256_blend_pd::<0b1010>(u0, u1),
+            _mm256_shuffle_pd::<0b0101>(u0, u2),
+            _mm256_blend_pd::<0b1010>(u1, u2),
+        ]
+    }
+
+    /// [`columns3`] backwards: three columns to four packed `DVec3`s.
+    #[target_feature(enable = "avx")]
+    #[inline]
+    pub(crate) fn rows3(x: __m256d, y: __m256d, z: __m256d) -> [__m256d; 3] {
+        let u0 = _mm256_shuffle_pd::<0b0000>(x, y); // x₀ y₀ x₂ y₂
+        let u1 = _mm256_blend_pd::<0b1010>(z, x); // z₀ x₁ z₂ x₃
+        let u2 = _mm256_shuffle_pd::<0b1111>(y, z); // y₁ z₁ y₃ z₃
+        [
+            _mm256_permute2f128_pd::<0x20>(u0, u1),
+            _mm256_permute2f128_pd::<0x30>(u2, u0),
+            _mm256_permute2f128_pd::<0x31>(u1, u2),
+        ]
+    }
 }
 
 /// Runs `job(c)` for every chunk `c` in `0..chunks`: shared with the helpers of the
