@@ -37,6 +37,10 @@ use std::collections::BTreeMap;
 #[cfg(target_arch = "x86_64")]
 const LANES: usize = 32 / std::mem::size_of::<Scalar>();
 
+/// Scalars in a cache line (64 bytes): the force columns and the chunks' scratch are laid
+/// out in whole lines (see [`Bands::split`] and [`BandBuf`](super::springs)).
+pub(crate) const LINE: usize = 64 / std::mem::size_of::<Scalar>();
+
 /// Fewest springs with one offset that make a band.
 pub const MIN_BAND: usize = 64;
 
@@ -108,10 +112,15 @@ impl Bands {
             if count < MIN_BAND || 2 * count < e - a {
                 continue;
             }
+            // Particle `p`'s entry, `g + o + p − a`, at the start of a cache line when `p` is
+            // a multiple of `LINE` (a chunk's first particle, for chunks of whole lines):
+            // the lines two threads write meet nowhere.
+            g += (a % LINE + LINE - (g + o) % LINE) % LINE;
             band.push(Band { o, a, e, at, g });
             at += e - a;
             g += e - a + 2 * o;
         }
+        let g = g.next_multiple_of(LINE);
         if band.is_empty() {
             return (None, springs.to_vec());
         }
@@ -167,7 +176,7 @@ impl Bands {
     /// Length of each chunk's scratch: the columns of positions and velocities of its
     /// particles and the `omax` after them, and its sums.
     pub(crate) fn scratch_len(&self) -> usize {
-        6 * (self.chunk + self.omax) + 3 * self.chunk
+        (6 * (self.chunk + self.omax) + 3 * self.chunk).next_multiple_of(LINE)
     }
 
     /// The force pass of the chunk of particles `p0..p1`: every band spring whose lower
@@ -610,6 +619,39 @@ fn add_in_lanes(s: &mut [Scalar], plus: &[Scalar], minus: &[Scalar]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each band's entry of a particle that starts a line-sized group starts a cache line of
+    /// the columns (so chunks of whole lines write no line in common), and each coordinate's
+    /// columns and each chunk's scratch are whole lines: bands of every offset a 37-wide
+    /// grid has, starting at odd particles.
+    #[test]
+    fn columns_are_laid_out_in_whole_lines() {
+        let w = 37u32;
+        let mut springs = Vec::new();
+        for p in 3..w * w {
+            for o in [1, 2, 3, w - 1, w, w + 1, 2 * w] {
+                if p + o < w * w {
+                    springs.push(PackedSpring {
+                        i: p,
+                        j: p + o,
+                        rest: 0.1,
+                        k: 10.0,
+                        damping: 0.0,
+                    });
+                }
+            }
+        }
+        let n = (w * w) as usize;
+        let bands = Bands::split(&springs, n, 4 * LINE)
+            .0
+            .expect("a grid has bands");
+        assert_eq!(bands.band.len(), 7);
+        for b in &bands.band {
+            assert_eq!((b.g + b.o + LINE * b.a - b.a) % LINE, 0, "offset {}", b.o);
+        }
+        assert_eq!(bands.columns % LINE, 0);
+        assert_eq!(bands.scratch_len() % LINE, 0);
+    }
 
     /// The loops compiled for AVX give the bits of the same loops compiled without it: runs
     /// of 1 to 37 springs (whole lanes and remainders), lengths from zero to large, damped and

@@ -30,7 +30,7 @@
 //!
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
-use super::bands::Bands;
+use super::bands::{Bands, LINE};
 use super::{ChunkLists, SharedMut, for_each_range};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
@@ -130,7 +130,8 @@ pub struct SpringRows {
 }
 
 /// The buffers of the band kernel: its force columns, shared by the passes, and a scratch
-/// per chunk.
+/// per chunk, each from a cache line's start (one line spare in each allocation): two
+/// threads' chunks then share no line (a line both write stalls each at every step).
 #[derive(Debug, Default)]
 struct BandBuf {
     columns: Vec<Scalar>,
@@ -141,9 +142,19 @@ impl BandBuf {
     /// The buffers `bands` (if any) need over `chunks` chunks.
     fn for_bands(bands: Option<&Bands>, chunks: usize) -> Mutex<Self> {
         Mutex::new(bands.map_or_else(Self::default, |b| Self {
-            columns: vec![0.0; b.buffer_len()],
-            scratch: vec![0.0; b.scratch_len() * chunks],
+            columns: vec![0.0; b.buffer_len() + LINE],
+            scratch: vec![0.0; b.scratch_len() * chunks + LINE],
         }))
+    }
+
+    /// The force columns and the scratch, from their first whole cache lines.
+    fn lines(&mut self) -> (&mut [Scalar], &mut [Scalar]) {
+        fn from_line(v: &mut [Scalar]) -> &mut [Scalar] {
+            let n = v.len().saturating_sub(LINE);
+            let skip = v.as_ptr().align_offset(64).min(v.len() - n);
+            &mut v[skip..skip + n]
+        }
+        (from_line(&mut self.columns), from_line(&mut self.scratch))
     }
 }
 
@@ -273,7 +284,7 @@ impl SpringRows {
     /// The gather of the rows and the bands together, when there are bands.
     fn with_bands<'a>(&'a self, buf: &'a mut BandBuf) -> Option<WithBands<'a>> {
         let bands = self.bands.as_ref()?;
-        let BandBuf { columns, scratch } = buf;
+        let (columns, scratch) = buf.lines();
         Some(WithBands {
             rows: self,
             bands,
@@ -358,8 +369,11 @@ impl SpringRows {
         bands: &mut BandBuf,
     ) {
         let buf = SharedMut(buf.as_mut_ptr());
-        let columns = SharedMut(bands.columns.as_mut_ptr());
-        let scratch = SharedMut(bands.scratch.as_mut_ptr());
+        let (columns, scratch) = bands.lines();
+        let (columns, scratch) = (
+            SharedMut(columns.as_mut_ptr()),
+            SharedMut(scratch.as_mut_ptr()),
+        );
         // The f64 kernels broadcast lanes across the register's halves (AVX2).
         #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
         let avx = std::arch::is_x86_feature_detected!("avx");
