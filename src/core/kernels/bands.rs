@@ -17,9 +17,14 @@
 //!    (The copy into columns is a 4×4 transpose per half register, eight `Vec3A`s at a time,
 //!    in the f32 build with AVX.)
 //! 2. **Gather.** Particle `p` adds, band after band, the force of the band's spring at `p`
-//!    and subtracts that of its spring at `p − o`: two contiguous reads per band, eight
-//!    particles at a time with their sums in registers (f32 with AVX), turned back into
-//!    rows once per eight particles.
+//!    and subtracts that of its spring at `p − o`: two contiguous reads per band, a register
+//!    of particles at a time with their sums in registers (with AVX: eight in f32, four in
+//!    f64), turned back into rows once per register.
+//!
+//! The force columns and each chunk's scratch are laid out in whole cache lines ([`LINE`]):
+//! a band's entry of a particle that starts a line-sized group starts a line, so chunks of
+//! whole lines, run on different threads, write no line in common (when they did, each
+//! thread's stores there waited for the other's copy to be invalidated, at every step).
 //!
 //! Every lane does the scalar operations of [`SpringRows`](super::springs::SpringRows)'s
 //! loop (`c = k (L/l − 1) − b (n·v_r)/l`, no fused multiply-add), element by element, so the
