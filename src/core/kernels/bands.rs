@@ -21,7 +21,7 @@
 //!    of particles at a time with their sums in registers (with AVX: eight in f32, four in
 //!    f64), turned back into rows once per register.
 //!
-//! The force columns and each chunk's scratch are laid out in whole cache lines ([`LINE`]):
+//! The force columns and each chunk's scratch are laid out in whole cache lines (64 bytes):
 //! a band's entry of a particle that starts a line-sized group starts a line, so chunks of
 //! whole lines, run on different threads, write no line in common (when they did, each
 //! thread's stores there waited for the other's copy to be invalidated, at every step).
