@@ -95,28 +95,31 @@ fn frames_allocate_nothing_after_the_first() {
         "64×64 cloth, chunked kernels: {n} allocations in 10 frames"
     );
     // The implicit solve on the team: linearly implicit Euler on the 64×64 cloth (the
-    // multigrid, the packed product, the solver's passes and sums in chunks), on two threads.
-    let scene = build::cloth(&build::ClothParams::default().resized(64, 64)).unwrap();
-    let (model, state) = scene.build().unwrap();
-    let cfg = DriverConfig {
-        integrator: IntegratorKind::LinearlyImplicitEuler,
-        policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
-        frame_dt: 1.0 / 60.0,
-        ..Default::default()
-    };
-    let mut sim = Simulation::new(model, state, cfg);
-    let n = bevy_soft_body::core::kernels::with_threads(2, move || {
-        sim.advance_frame().unwrap();
-        let before = ALLOCS.load(Ordering::Relaxed);
-        for _ in 0..5 {
+    // multigrid, the packed product, the solver's passes and sums in chunks) and on a 96×96
+    // one (the band product, which takes systems of 8192 particles or more), on two threads.
+    for size in [64, 96] {
+        let scene = build::cloth(&build::ClothParams::default().resized(size, size)).unwrap();
+        let (model, state) = scene.build().unwrap();
+        let cfg = DriverConfig {
+            integrator: IntegratorKind::LinearlyImplicitEuler,
+            policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
+            frame_dt: 1.0 / 60.0,
+            ..Default::default()
+        };
+        let mut sim = Simulation::new(model, state, cfg);
+        let n = bevy_soft_body::core::kernels::with_threads(2, move || {
             sim.advance_frame().unwrap();
-        }
-        ALLOCS.load(Ordering::Relaxed) - before
-    });
-    assert_eq!(
-        n, 0,
-        "64×64 cloth, implicit solve on two threads: {n} allocations in 5 frames"
-    );
+            let before = ALLOCS.load(Ordering::Relaxed);
+            for _ in 0..5 {
+                sim.advance_frame().unwrap();
+            }
+            ALLOCS.load(Ordering::Relaxed) - before
+        });
+        assert_eq!(
+            n, 0,
+            "{size}×{size} cloth, implicit solve on two threads: {n} allocations in 5 frames"
+        );
+    }
     // Self-collision: a 16² cloth of the pile, settled on the sphere and ground after 3 s;
     // its passes reuse their buffers.
     let p = build::ClothPileParams {

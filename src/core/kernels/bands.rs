@@ -421,7 +421,7 @@ impl Bands {
 /// Copies vectors into three columns (exact: the same bits however it is done); with AVX,
 /// eight `Vec3A`s at a time in the f32 build (a 4×4 transpose per half of a register), four
 /// `DVec3`s (three registers' worth) in the f64 build.
-fn to_columns(a: &[Vector], xs: &mut [Scalar], ys: &mut [Scalar], zs: &mut [Scalar]) {
+pub(crate) fn to_columns(a: &[Vector], xs: &mut [Scalar], ys: &mut [Scalar], zs: &mut [Scalar]) {
     #[allow(unused_mut)]
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]

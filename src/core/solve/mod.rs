@@ -9,8 +9,12 @@
 //! then over the chunks in order. The chunks depend on the system's size alone, so a solve
 //! gives the same bits on any number of threads. Where the processor has AVX, the products of
 //! matrices whose blocks are all symmetric (springs') run eight rows (four in `f64`) at a time
-//! from a packed copy of the blocks (`packed`), with the same bits as by rows.
+//! from a packed copy of the blocks (`packed`), with the same bits as by rows. A structured
+//! mesh's springs (a grid cloth's: a few offsets between their particles) take a band copy
+//! instead (`bands`): each block stored once by offset, the rows read in lanes, its own order
+//! of the sums, the same bits on every machine.
 
+pub(crate) mod bands;
 pub(crate) mod cholesky;
 pub mod multigrid;
 pub(crate) mod packed;
@@ -310,6 +314,9 @@ pub(crate) enum Product<'a> {
     Rows(&'a SpringMatrix),
     /// The packed copy, eight rows at a time (the copy said it serves the matrix).
     Packed(&'a SpringMatrix, &'a packed::Packed),
+    /// The band copy of a structured mesh's springs (the copy said it serves the matrix):
+    /// its own order of the sums, the same on every machine.
+    Bands(&'a SpringMatrix, &'a bands::BandCopy),
 }
 
 impl<'a> Product<'a> {
@@ -325,7 +332,7 @@ impl<'a> Product<'a> {
     /// The matrix.
     pub(crate) fn matrix(self) -> &'a SpringMatrix {
         match self {
-            Product::Rows(a) | Product::Packed(a, _) => a,
+            Product::Rows(a) | Product::Packed(a, _) | Product::Bands(a, _) => a,
         }
     }
 
@@ -354,6 +361,16 @@ impl<'a> Product<'a> {
             "the matrix's structure changed after it was built"
         );
         let yp = SharedMut(y.as_mut_ptr());
+        // The band copy's columns of positions, each chunk its own part, held for the pass.
+        let mut columns = match self {
+            Product::Bands(_, b) => Some(b.columns()),
+            _ => None,
+        };
+        let cols = SharedMut(
+            columns
+                .as_mut()
+                .map_or(std::ptr::null_mut(), |c| c.as_mut_ptr()),
+        );
         let chunk = |r: Range<usize>| {
             // SAFETY: the chunks' ranges are disjoint and below `n ≤ y.len()`; `y` is
             // borrowed exclusively for the call.
@@ -371,6 +388,10 @@ impl<'a> Product<'a> {
                     }
                 }
                 Product::Packed(a, p) => p.rows_times(a, r.clone(), x, &mut put),
+                // SAFETY: the columns are held for the pass; each chunk uses its own part.
+                Product::Bands(a, b) => unsafe {
+                    b.rows_times(a, r.clone(), x, cols.ptr(), &mut put)
+                },
             }
             [d]
         };
@@ -501,6 +522,7 @@ pub struct Pcg {
 struct Scratch {
     partials: Partials,
     packed: packed::Packed,
+    bands: bands::BandCopy,
 }
 
 impl Default for Pcg {
@@ -645,8 +667,12 @@ impl Pcg {
         );
         // Taken out for the solve (the preconditioner borrows `self`), put back at the end.
         let mut scratch = self.scratch.take().unwrap_or_default();
-        let usable = scratch.packed.update(a);
-        let op = Product::of(a, &scratch.packed, usable);
+        let op = if scratch.bands.update(a) {
+            Product::Bands(a, &scratch.bands)
+        } else {
+            let usable = scratch.packed.update(a);
+            Product::of(a, &scratch.packed, usable)
+        };
         let report = self.iterate(op, b, x, mask, &scratch.partials);
         self.scratch = Some(scratch);
         report
