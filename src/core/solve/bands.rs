@@ -21,9 +21,14 @@
 //! band's block columns and the chunk's positions, copied into columns once per product, are
 //! read at consecutive places, with no index and no gather.
 //!
+//! The slots before the first particle are zeros, as are the positions past either end in
+//! the columns, so every row adds every band's two terms (a zero block times a zero vector
+//! where a term falls outside the system) and every whole register of rows goes in lanes.
 //! The order of the sums is the copy's own (not [`SpringMatrix::row_times`]'s), the same in
-//! the lanes and in the scalar rows (the rows near the ends, and every row without AVX), so
-//! the product has the same bits on every machine and any number of threads.
+//! the lanes and in the scalar rows (a chunk's last rows short of a register, and every row
+//! without AVX), so the product has the same bits on every machine and any number of
+//! threads. It reads fewer bytes than the packed product, not half the time: see
+//! `docs/BENCHMARKS.md` (implicit methods) for what it gained and what bounds it.
 
 use super::SpringMatrix;
 use crate::math::{Scalar, Vector};
@@ -70,13 +75,15 @@ pub(crate) struct BandCopy {
     columns: Columns,
 }
 
-/// The chunks' columns of positions (cloned empty: scratch).
+/// The chunks' columns of positions (scratch: cloned as zeros of the same length, since a
+/// clone of a usable copy serves the same structure).
 #[derive(Debug, Default)]
 struct Columns(Mutex<Vec<Scalar>>);
 
 impl Clone for Columns {
     fn clone(&self) -> Self {
-        Self::default()
+        let len = self.0.lock().unwrap_or_else(|e| e.into_inner()).len();
+        Self(Mutex::new(vec![0.0; len]))
     }
 }
 
@@ -133,11 +140,13 @@ impl BandCopy {
         let omax = self.offsets.last().copied().unwrap_or(0);
         self.omax = omax;
         self.blocks.resize(6 * self.offsets.len() * (n + omax), 0.0);
-        let (size, chunks) = super::chunking(n);
-        let mut columns = self.columns.0.lock().unwrap_or_else(|e| e.into_inner());
-        columns.resize(3 * (size + 2 * omax) * chunks, 0.0);
-        drop(columns);
         self.usable = true;
+        let len = self.columns_len();
+        self.columns
+            .0
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .resize(len, 0.0);
     }
 
     /// The blocks' values into the bands.
@@ -157,7 +166,22 @@ impl BandCopy {
     /// The chunks' columns of positions, for the products of one solve's pass: the caller
     /// holds them while the pass's chunks run.
     pub(crate) fn columns(&self) -> MutexGuard<'_, Vec<Scalar>> {
-        self.columns.0.lock().unwrap_or_else(|e| e.into_inner())
+        let mut columns = self.columns.0.lock().unwrap_or_else(|e| e.into_inner());
+        let len = self.columns_len();
+        if columns.len() < len {
+            columns.resize(len, 0.0);
+        }
+        columns
+    }
+
+    /// Length of the chunks' columns of positions: three columns of a chunk's rows and the
+    /// `omax` on either side, for each chunk.
+    fn columns_len(&self) -> usize {
+        if !self.usable {
+            return 0;
+        }
+        let (size, chunks) = super::chunking(self.n);
+        3 * (size + 2 * self.omax) * chunks
     }
 
     /// Slot `p`'s block of band `b` (`p ≥ −omax`, given as `p + omax`) times `v`:
@@ -444,6 +468,23 @@ mod tests {
                 assert!(copy.update_from(&a, 0));
             }
         }
+    }
+
+    /// A clone of a usable copy (a solver cloned with its body) serves the same products,
+    /// with the same bits.
+    #[test]
+    fn a_clone_of_the_copy_serves_the_same_products() {
+        let a = grid(40, 17);
+        let n = a.len();
+        let mut copy = BandCopy::default();
+        assert!(copy.update_from(&a, 0));
+        let mut clone = copy.clone();
+        assert!(clone.update_from(&a, 0));
+        let x: Vec<Vector> = (0..n).map(|p| Vector::splat(p as Scalar * 0.01)).collect();
+        let (mut y1, mut y2) = (vec![Vector::ZERO; n], vec![Vector::ZERO; n]);
+        Product::Bands(&a, &copy).mul_map(&x, &mut y1, |_, v| v, None);
+        Product::Bands(&a, &clone).mul_map(&x, &mut y2, |_, v| v, None);
+        assert_eq!(bits(&y1), bits(&y2));
     }
 
     /// A dot product through the band product sums as the solver's do (per chunk, then in
