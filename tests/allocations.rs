@@ -42,6 +42,18 @@ fn main() {
     );
 }
 
+/// Heap allocations (any thread's) while `sim` advances `frames` frames.
+fn allocations_in<S: OdeState, Sys: OdeSystem<S>>(
+    sim: &mut Simulation<S, Sys>,
+    frames: usize,
+) -> usize {
+    let before = ALLOCS.load(Ordering::Relaxed);
+    for _ in 0..frames {
+        sim.advance_frame().unwrap();
+    }
+    ALLOCS.load(Ordering::Relaxed) - before
+}
+
 fn frames_allocate_nothing_after_the_first() {
     let mut scene = build::cloth_sphere(&build::ClothParams::default(), 0.25, 0.6, 4.0).unwrap();
     scene.wind = Some(Wind::default());
@@ -64,11 +76,7 @@ fn frames_allocate_nothing_after_the_first() {
         };
         let mut sim = Simulation::new(model.clone(), state.clone(), cfg);
         sim.advance_frame().unwrap();
-        let before = ALLOCS.load(Ordering::Relaxed);
-        for _ in 0..30 {
-            sim.advance_frame().unwrap();
-        }
-        let n = ALLOCS.load(Ordering::Relaxed) - before;
+        let n = allocations_in(&mut sim, 30);
         assert_eq!(n, 0, "{kind}: {n} allocations in 30 frames");
     }
     // A body large enough for the force kernels to cut into chunks (64×64 cloth: six chunks of
@@ -84,11 +92,7 @@ fn frames_allocate_nothing_after_the_first() {
     let mut sim = Simulation::new(model, state, cfg);
     let n = bevy_soft_body::core::kernels::with_threads(2, move || {
         sim.advance_frame().unwrap();
-        let before = ALLOCS.load(Ordering::Relaxed);
-        for _ in 0..10 {
-            sim.advance_frame().unwrap();
-        }
-        ALLOCS.load(Ordering::Relaxed) - before
+        allocations_in(&mut sim, 10)
     });
     assert_eq!(
         n, 0,
@@ -109,11 +113,7 @@ fn frames_allocate_nothing_after_the_first() {
         let mut sim = Simulation::new(model, state, cfg);
         let n = bevy_soft_body::core::kernels::with_threads(2, move || {
             sim.advance_frame().unwrap();
-            let before = ALLOCS.load(Ordering::Relaxed);
-            for _ in 0..5 {
-                sim.advance_frame().unwrap();
-            }
-            ALLOCS.load(Ordering::Relaxed) - before
+            allocations_in(&mut sim, 5)
         });
         assert_eq!(
             n, 0,
@@ -135,11 +135,7 @@ fn frames_allocate_nothing_after_the_first() {
     };
     let mut sim = Simulation::new(model, state, cfg);
     sim.run_until(3.0).unwrap();
-    let before = ALLOCS.load(Ordering::Relaxed);
-    for _ in 0..30 {
-        sim.advance_frame().unwrap();
-    }
-    let n = ALLOCS.load(Ordering::Relaxed) - before;
+    let n = allocations_in(&mut sim, 30);
     let passes = sim.system.self_contact.as_ref().unwrap().total.passes_run;
     assert!(passes > 30);
     assert_eq!(n, 0, "self-collision: {n} allocations in 30 frames");

@@ -282,78 +282,35 @@ impl Bands {
     /// # Safety
     /// `p1 − p0` is a multiple of [`LANES`]; `out` holds `p1 − p0` vectors; every band
     /// reaches `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
-    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+    #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
     unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
-        use std::arch::x86_64::*;
+        #[cfg(feature = "f64")]
+        use std::arch::x86_64::{
+            _mm256_add_pd as add, _mm256_loadu_pd as load, _mm256_setzero_pd as zero,
+            _mm256_sub_pd as sub,
+        };
+        #[cfg(not(feature = "f64"))]
+        use std::arch::x86_64::{
+            _mm256_add_ps as add, _mm256_loadu_ps as load, _mm256_setzero_ps as zero,
+            _mm256_sub_ps as sub,
+        };
         let c = self.columns;
         let g = g.as_ptr();
-        for t in (p0..p1).step_by(4) {
-            let mut s = [_mm256_setzero_pd(); 3];
+        for t in (p0..p1).step_by(LANES) {
+            let mut s = [zero(); 3];
             for b in &self.band {
-                // SAFETY: `a ≤ t` and `t + 4 ≤ e + o`: both reads within the band's column.
+                // SAFETY: `a ≤ t` and `t + LANES ≤ e + o`: both reads within the band's column.
                 unsafe {
                     let minus = g.add(b.g + t - b.a);
                     let plus = minus.add(b.o);
                     for (k, s) in s.iter_mut().enumerate() {
-                        let d = _mm256_sub_pd(
-                            _mm256_loadu_pd(plus.add(k * c)),
-                            _mm256_loadu_pd(minus.add(k * c)),
-                        );
-                        *s = _mm256_add_pd(*s, d);
+                        *s = add(*s, sub(load(plus.add(k * c)), load(minus.add(k * c))));
                     }
                 }
             }
-            let rows = super::avx::rows3(s[0], s[1], s[2]);
-            // SAFETY: `DVec3` is three packed `f64`s; particles `t − p0..t − p0 + 4` are in
-            // `out`.
-            unsafe {
-                let o = out.add(t - p0) as *mut f64;
-                for (k, row) in rows.into_iter().enumerate() {
-                    let o = o.add(4 * k);
-                    _mm256_storeu_pd(o, _mm256_add_pd(_mm256_loadu_pd(o), row));
-                }
-            }
-        }
-    }
-
-    /// [`Self::gather`] of particles `p0..p1`, every band reaching all of them, [`LANES`] at
-    /// a time: each band's two columns read and their difference added, band after band, in
-    /// registers; the sums turned to rows and added to `out`.
-    ///
-    /// # Safety
-    /// `p1 − p0` is a multiple of [`LANES`]; `out` holds `p1 − p0` vectors; every band
-    /// reaches `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
-    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
-    #[target_feature(enable = "avx")]
-    unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
-        use std::arch::x86_64::*;
-        let c = self.columns;
-        let g = g.as_ptr();
-        for t in (p0..p1).step_by(8) {
-            let mut s = [_mm256_setzero_ps(); 3];
-            for b in &self.band {
-                // SAFETY: `a ≤ t` and `t + 8 ≤ e + o`: both reads within the band's column.
-                unsafe {
-                    let minus = g.add(b.g + t - b.a);
-                    let plus = minus.add(b.o);
-                    for (k, s) in s.iter_mut().enumerate() {
-                        let d = _mm256_sub_ps(
-                            _mm256_loadu_ps(plus.add(k * c)),
-                            _mm256_loadu_ps(minus.add(k * c)),
-                        );
-                        *s = _mm256_add_ps(*s, d);
-                    }
-                }
-            }
-            let rows = super::avx::rows(s[0], s[1], s[2]);
-            for (q, row) in rows.into_iter().enumerate() {
-                // SAFETY: `t − p0 + q < p1 − p0`.
-                unsafe {
-                    let o = out.add(t - p0 + q) as *mut __m128;
-                    *o = _mm_add_ps(*o, row);
-                }
-            }
+            // SAFETY: particles `t − p0..t − p0 + LANES` are in `out`.
+            unsafe { add_rows(s, out.add(t - p0)) };
         }
     }
 
@@ -415,6 +372,42 @@ impl Bands {
             }
         }
         sum
+    }
+}
+
+/// Adds three columns of sums (x, y, z of [`LANES`] particles) to those particles' forces
+/// at `out`, as rows: eight `Vec3A`s in the f32 build.
+///
+/// # Safety
+/// AVX is present; `out` holds [`LANES`] vectors.
+#[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+#[target_feature(enable = "avx")]
+unsafe fn add_rows(s: [std::arch::x86_64::__m256; 3], out: *mut Vector) {
+    use std::arch::x86_64::*;
+    for (q, row) in super::avx::rows(s[0], s[1], s[2]).into_iter().enumerate() {
+        // SAFETY: `q < LANES`, within `out`; a `Vec3A` is an aligned `__m128`.
+        unsafe {
+            let o = out.add(q) as *mut __m128;
+            *o = _mm_add_ps(*o, row);
+        }
+    }
+}
+
+/// [`add_rows`] in the f64 build: four packed `DVec3`s, three registers' worth.
+///
+/// # Safety
+/// As the f32 build's.
+#[cfg(all(target_arch = "x86_64", feature = "f64"))]
+#[target_feature(enable = "avx")]
+unsafe fn add_rows(s: [std::arch::x86_64::__m256d; 3], out: *mut Vector) {
+    use std::arch::x86_64::*;
+    let o = out as *mut f64;
+    for (k, row) in super::avx::rows3(s[0], s[1], s[2]).into_iter().enumerate() {
+        // SAFETY: `DVec3` is three packed `f64`s; the twelve of four particles are in `out`.
+        unsafe {
+            let o = o.add(4 * k);
+            _mm256_storeu_pd(o, _mm256_add_pd(_mm256_loadu_pd(o), row));
+        }
     }
 }
 
