@@ -123,16 +123,36 @@ fn jacobians_match_central_differences() {
 
 #[test]
 fn assembled_matrix_is_m_minus_h_dv_minus_h2_dx() {
-    // Without dampers the position Jacobian is exactly what the implicit system uses (the
-    // damper's position term is the only part left out), and with `definite = false` nothing
-    // is clamped: A = M − h ∂f/∂v − h² ∂f/∂x, symmetric.
-    let (model, st) = network(4, false);
+    // With `definite = false` nothing is clamped: A = M − h ∂f/∂v − h² ∂f/∂x, symmetric, with
+    // ∂f/∂x without the damper's position term (the only part implicit steps leave out): the
+    // position Jacobian of the same network with its dampers taken off.
+    for damped in [false, true] {
+        assembled_matrix_holds(damped);
+    }
+}
+
+fn assembled_matrix_holds(damped: bool) {
+    let (model, st) = network(4, damped);
     let h = 0.01;
     let mut a = model.new_matrix();
     let mut kv = vec![Vector::ZERO; st.len()];
     model.assemble(&st, h as Scalar, false, &mut a, &mut kv);
     let dense = a.to_dense();
-    let (jx, jv) = model.dense_jacobians(&st);
+    let (_, jv) = model.dense_jacobians(&st);
+    let mut undamped = model.clone();
+    for s in undamped.springs.as_mut_slice() {
+        s.damping = 0.0;
+    }
+    let (jx, _) = undamped.dense_jacobians(&st);
+    if damped {
+        assert!(
+            jv.iter()
+                .flatten()
+                .zip(undamped.dense_jacobians(&st).1.iter().flatten())
+                .any(|(a, b)| a != b),
+            "the damped network has dampers"
+        );
+    }
     let n = dense.len();
     let tol = if F64 { 1e-12 } else { 1e-4 };
     for r in 0..n {
@@ -156,6 +176,146 @@ fn assembled_matrix_is_m_minus_h_dv_minus_h2_dx() {
         // K v from the dense ∂f/∂x.
         let kvr: f64 = (0..n).map(|c| jx[r][c] * st.v[c / 3][c % 3] as f64).sum();
         assert!((kv[r / 3][r % 3] as f64 - kvr).abs() <= tol * (1.0 + kvr.abs()));
+    }
+}
+
+/// The implicit matrices are filled on the team (each spring's block in chunks of springs,
+/// then each row's diagonal and `K v` gathered from its springs in chunks of rows): the same
+/// bits on one, two and three threads, and, to round-off, the matrix a plain scatter over the
+/// springs builds from the public per-spring blocks (`spring_stiffness`, `damper_block`),
+/// written here apart from the assembly. A 48² cloth (three chunks of rows, thirteen of
+/// springs) with its particles jittered, so that some springs are compressed and the clamp of
+/// the definite option acts, for the linearly implicit matrix (definite and not), the
+/// damping-only matrix and backward Euler's Hessian.
+#[cfg(feature = "parallel")]
+#[test]
+fn implicit_matrices_filled_on_the_team_are_the_scatter_on_any_number_of_threads() {
+    use bevy_soft_body::core::jacobian::{damper_block, spring_stiffness};
+    use bevy_soft_body::core::kernels::with_threads;
+    use bevy_soft_body::math::{Matrix3, VectorExt};
+    let p = build::ClothParams::default().resized(48, 48);
+    let (model, mut st) = build::cloth(&p).unwrap().build().unwrap();
+    let mut r = 5u64;
+    let mut jitter = |s: f64| {
+        Vector::new(
+            (lcg(&mut r) - 0.5) as Scalar,
+            (lcg(&mut r) - 0.5) as Scalar,
+            (lcg(&mut r) - 0.5) as Scalar,
+        ) * s as Scalar
+    };
+    let edge = (st.x[1] - st.x[0]).length() as f64;
+    for i in 0..st.len() {
+        st.x[i] += jitter(0.6 * edge);
+        st.v[i] = jitter(2.0);
+    }
+    let x1: Vec<Vector> = st.x.iter().map(|x| *x + jitter(0.1 * edge)).collect();
+    let h = 1.0 / 60.0;
+    let n = st.len();
+    let springs = model.springs.as_slice();
+    let compressed = springs
+        .iter()
+        .filter(|s| ((st.x[s.i as usize] - st.x[s.j as usize]).length()) < s.rest)
+        .count();
+    assert!(
+        compressed > springs.len() / 10,
+        "{compressed} compressed springs"
+    );
+    // kind: 0 linearly implicit (not definite), 1 the same definite, 2 damping only,
+    // 3 backward Euler's Hessian at x1.
+    let fill = |kind: u32, threads: usize| {
+        with_threads(threads, || {
+            let mut a = model.new_matrix();
+            let mut kv = vec![Vector::ZERO; n];
+            match kind {
+                0 | 1 => model.assemble(&st, h, kind == 1, &mut a, &mut kv),
+                2 => model.assemble_damping(&st, h, &mut a),
+                _ => model.assemble_incremental_hessian(h, &st.x, &x1, true, &mut a),
+            }
+            (a.diag.clone(), a.off.clone(), kv)
+        })
+    };
+    for kind in 0..4 {
+        let one = fill(kind, 1);
+        for threads in [2, 3] {
+            assert!(one == fill(kind, threads), "kind {kind}: {threads} threads");
+        }
+        // The scatter, in f64.
+        let c = (model.linear_drag() * h) as f64;
+        let mut diag: Vec<[f64; 9]> = model
+            .mass()
+            .iter()
+            .map(|&m| {
+                let d = m as f64 + c;
+                [d, 0.0, 0.0, 0.0, d, 0.0, 0.0, 0.0, d]
+            })
+            .collect();
+        let mut kv = vec![[0.0f64; 3]; n];
+        let (h, h2) = (h as f64, (h * h) as f64);
+        let as64 = |m: Matrix3| m.to_cols_array().map(|v| v as f64);
+        for (k, s) in springs.iter().enumerate() {
+            let (i, j) = (s.i as usize, s.j as usize);
+            let (ks, ds) = match kind {
+                3 => (
+                    as64(spring_stiffness(s, &x1, true)),
+                    as64(damper_block(s, &st.x)),
+                ),
+                _ => (
+                    as64(spring_stiffness(s, &st.x, kind == 1)),
+                    as64(damper_block(s, &st.x)),
+                ),
+            };
+            let blk: [f64; 9] = std::array::from_fn(|e| {
+                if kind == 2 {
+                    h * ds[e]
+                } else {
+                    h * ds[e] + h2 * ks[e]
+                }
+            });
+            let off = as64(one.1[k]);
+            let scale = blk.iter().fold(1e-30f64, |m, v| m.max(v.abs()));
+            let tol = if F64 { 1e-12 } else { 1e-5 };
+            for e in 0..9 {
+                assert!(
+                    (off[e] + blk[e]).abs() <= tol * scale,
+                    "kind {kind}, spring {k}: off-diagonal {:?} against −{blk:?}",
+                    one.1[k]
+                );
+                diag[i][e] += blk[e];
+                diag[j][e] += blk[e];
+            }
+            if kind < 2 {
+                let vr = (st.v[i] - st.v[j]).to_f64();
+                for q in 0..3 {
+                    let u = (0..3).map(|c| ks[3 * c + q] * vr[c]).sum::<f64>();
+                    kv[i][q] -= u;
+                    kv[j][q] += u;
+                }
+            }
+        }
+        // Each row sums about a dozen blocks: round-off of a dozen terms of its largest.
+        let tol = if F64 { 1e-12 } else { 1e-5 };
+        for i in 0..n {
+            let d = as64(one.0[i]);
+            let scale = diag[i].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for e in 0..9 {
+                assert!(
+                    (d[e] - diag[i][e]).abs() <= tol * scale,
+                    "kind {kind}, row {i}: diagonal {d:?} against {:?}",
+                    diag[i]
+                );
+            }
+            if kind < 2 {
+                let got = one.2[i].to_f64();
+                let scale = springs.iter().fold(0.0f64, |m, s| m.max(s.k as f64)) * 4.0;
+                for q in 0..3 {
+                    assert!(
+                        (got[q] - kv[i][q]).abs() <= tol * scale,
+                        "kind {kind}, row {i}: K v {got:?} against {:?}",
+                        kv[i]
+                    );
+                }
+            }
+        }
     }
 }
 

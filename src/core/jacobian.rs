@@ -57,6 +57,37 @@ pub fn damper_block(s: &PackedSpring, x: &[Vector]) -> Matrix3 {
     outer(n, n) * s.damping
 }
 
+/// One spring's block `h b n nᵀ + h² K_s` of the implicit matrix and its `K_s (v_i − v_j)`,
+/// without forming `K_s`: with `g = 1 − L/l` (clamped at zero when `definite`),
+/// `K_s = k [(1 − g) n nᵀ + g I]`, so the block is `(h b + h² k (1 − g)) n nᵀ + h² k g I` —
+/// symmetric to the bit, as every `α n nᵀ + β I` is — and the product
+/// `k (1 − g) (n · v_r) n + k g v_r`. A zero-length spring takes `K_s = k I` and no damper, as
+/// [`spring_blocks`] does.
+#[inline]
+fn assembly_block(
+    s: &PackedSpring,
+    x: &[Vector],
+    v: &[Vector],
+    h: Scalar,
+    definite: bool,
+) -> (Matrix3, Vector) {
+    let (i, j) = (s.i as usize, s.j as usize);
+    let (d, vr) = (x[i] - x[j], v[i] - v[j]);
+    let h2 = h * h;
+    let l = d.length();
+    if l == 0.0 {
+        return (Matrix3::IDENTITY * (h2 * s.k), vr * s.k);
+    }
+    let n = d / l;
+    let mut g = 1.0 - s.rest / l;
+    if definite && g < 0.0 {
+        g = 0.0;
+    }
+    let (along, across) = (s.k * (1.0 - g), s.k * g);
+    let blk = outer(n, n) * (h * s.damping + h2 * along) + Matrix3::IDENTITY * (h2 * across);
+    (blk, n * (along * n.dot(vr)) + vr * across)
+}
+
 /// `K_s`, `b n nᵀ` and the damper's position block `G_s` of one spring.
 pub fn spring_blocks(
     s: &PackedSpring,
@@ -164,13 +195,11 @@ impl ParticleModel {
         self.drag + self.wind_coefficient()
     }
 
-    /// Sets every diagonal block of `a` to `(m + h c) I`: mass plus `h` times the drag
-    /// Jacobian, the part every implicit matrix starts from.
-    fn fill_mass_diagonal(&self, h: Scalar, a: &mut SpringMatrix) {
-        let c = self.linear_drag();
-        for (d, m) in a.diag.iter_mut().zip(self.mass()) {
-            *d = Matrix3::IDENTITY * (*m + h * c);
-        }
+    /// Each particle's diagonal block before the springs', `(m + h c) I`: mass plus `h`
+    /// times the drag Jacobian, the part every implicit matrix starts from.
+    fn mass_diagonal(&self, h: Scalar) -> impl Fn(usize) -> Matrix3 + Sync + Send + '_ {
+        let (c, mass) = (self.linear_drag(), self.mass());
+        move |i| Matrix3::IDENTITY * (mass[i] + h * c)
     }
 }
 
@@ -394,21 +423,24 @@ impl Linearization for ParticleModel {
     }
 
     fn assemble_damping(&self, state: &ParticleState, h: Scalar, a: &mut SpringMatrix) {
-        self.fill_mass_diagonal(h, a);
-        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
-            let (i, j) = (s.i as usize, s.j as usize);
-            let d = state.x[i] - state.x[j];
-            let l = d.length();
-            let blk = if l > 0.0 && s.damping != 0.0 {
-                let n = d / l;
-                outer(n, n) * (h * s.damping)
-            } else {
-                Matrix3::ZERO
-            };
-            a.diag[i] += blk;
-            a.diag[j] += blk;
-            *o = -blk;
-        }
+        let (springs, x) = (self.springs.as_slice(), &state.x);
+        a.fill_springs(
+            springs.len(),
+            self.mass_diagonal(h),
+            |k| {
+                let s = &springs[k];
+                let d = x[s.i as usize] - x[s.j as usize];
+                let l = d.length();
+                let blk = if l > 0.0 && s.damping != 0.0 {
+                    let n = d / l;
+                    outer(n, n) * (h * s.damping)
+                } else {
+                    Matrix3::ZERO
+                };
+                (blk, Vector::ZERO)
+            },
+            None,
+        );
         a.off[self.springs.len()..].fill(Matrix3::ZERO);
     }
 
@@ -609,15 +641,18 @@ impl ParticleModel {
         project_tets: bool,
         a: &mut SpringMatrix,
     ) {
-        self.fill_mass_diagonal(h, a);
         let h2 = h * h;
-        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
-            let blk = spring_stiffness(s, x, definite) * h2 + damper_block(s, x0) * h;
-            let (i, j) = (s.i as usize, s.j as usize);
-            a.diag[i] += blk;
-            a.diag[j] += blk;
-            *o = -blk;
-        }
+        let springs = self.springs.as_slice();
+        a.fill_springs(
+            springs.len(),
+            self.mass_diagonal(h),
+            |k| {
+                let s = &springs[k];
+                let blk = spring_stiffness(s, x, definite) * h2 + damper_block(s, x0) * h;
+                (blk, Vector::ZERO)
+            },
+            None,
+        );
         self.add_tet_stiffness(x, h2, project_tets, a, None);
     }
 
@@ -630,21 +665,15 @@ impl ParticleModel {
         a: &mut SpringMatrix,
         kv: &mut [Vector],
     ) {
-        self.fill_mass_diagonal(h, a);
-        kv.fill(Vector::ZERO);
         let h2 = h * h;
-        for (o, s) in a.off.iter_mut().zip(self.springs.as_slice()) {
-            let (ks, ds, _) = spring_blocks(s, &state.x, &state.v, definite);
-            let blk = ds * h + ks * h2;
-            let (i, j) = (s.i as usize, s.j as usize);
-            a.diag[i] += blk;
-            a.diag[j] += blk;
-            *o = -blk;
-            // (K v)_i = −K_s (v_i − v_j), (K v)_j = +K_s (v_i − v_j)
-            let kvr = ks * (state.v[i] - state.v[j]);
-            kv[i] -= kvr;
-            kv[j] += kvr;
-        }
+        let (springs, x, v) = (self.springs.as_slice(), &state.x, &state.v);
+        // (K v)_i = −K_s (v_i − v_j), (K v)_j = +K_s (v_i − v_j)
+        a.fill_springs(
+            springs.len(),
+            self.mass_diagonal(h),
+            |k| assembly_block(&springs[k], x, v, h, definite),
+            Some(kv),
+        );
         self.add_tet_stiffness(&state.x, h2, project_tets, a, Some((&state.v, kv)));
         self.add_field_diagonal(state, h, h2, a, Some(kv));
     }

@@ -144,6 +144,8 @@ pub struct SpringMatrix {
     /// Names the structure (a number no other structure built by this process has), so that
     /// copies made of it know when it changes.
     structure: u64,
+    /// Each spring's vector of the last [`fill_springs`](Self::fill_springs) (scratch).
+    edge: Vec<Vector>,
 }
 
 /// The next [`SpringMatrix::structure`].
@@ -171,6 +173,7 @@ impl SpringMatrix {
             pairs,
             symmetric: 0,
             structure: next_structure(),
+            edge: vec![],
         }
     }
 
@@ -282,6 +285,87 @@ impl SpringMatrix {
             }
         }
         self.diag[i] * x[i] + (s[0] + s[1])
+    }
+
+    /// Fills the springs' part of the matrix on the team the caller runs in: the first
+    /// `springs` off-diagonal blocks (the springs', symmetric) are `−B_k` and each spring's
+    /// vector `u_k`, from `spring(k) = (B_k, u_k)`, in chunks of springs; then each diagonal
+    /// block is `diag(i) + Σ B_k` over the row's springs and, with `kv`, `kv_i = Σ ∓u_k`
+    /// (`−` where the row is the spring's `i`, `+` where it is its `j`), in chunks of rows,
+    /// each row's sums in its entries' (column) order. Every block and row is written by one
+    /// chunk alone, so the bits are the same on any number of threads; the blocks of other
+    /// pairs (tet edges) are left alone.
+    pub(crate) fn fill_springs(
+        &mut self,
+        springs: usize,
+        diag: impl Fn(usize) -> Matrix3 + Sync + Send,
+        spring: impl Fn(usize) -> (Matrix3, Vector) + Sync + Send,
+        kv: Option<&mut [Vector]>,
+    ) {
+        debug_assert!(
+            springs <= self.symmetric,
+            "springs past the symmetric blocks"
+        );
+        let springs = springs.min(self.symmetric);
+        let n = self.len();
+        let with_kv = kv.is_some();
+        assert!(
+            kv.as_ref().is_none_or(|kv| kv.len() >= n),
+            "kv shorter than the matrix"
+        );
+        self.edge
+            .resize(if with_kv { springs } else { 0 }, Vector::ZERO);
+        let (off, edge) = (
+            SharedMut(self.off.as_mut_ptr()),
+            SharedMut(self.edge.as_mut_ptr()),
+        );
+        kernels::for_each_range(springs, kernels::chunk_size(springs, CHUNK_ROWS), |r| {
+            // SAFETY: disjoint ranges of `off` and `edge`, within their first `springs`.
+            let off = unsafe { off.slice(r.clone()) };
+            if with_kv {
+                // SAFETY: as above.
+                let edge = unsafe { edge.slice(r.clone()) };
+                for ((o, u), k) in off.iter_mut().zip(edge).zip(r) {
+                    let (b, v) = spring(k);
+                    (*o, *u) = (-b, v);
+                }
+            } else {
+                for (o, k) in off.iter_mut().zip(r) {
+                    *o = -spring(k).0;
+                }
+            }
+        });
+        let (dp, kvp) = (
+            SharedMut(self.diag.as_mut_ptr()),
+            SharedMut(kv.map_or(std::ptr::null_mut(), <[Vector]>::as_mut_ptr)),
+        );
+        let (rows, off, edge) = (&self.rows, &self.off, &self.edge);
+        for_each_rows(n, |r| {
+            // SAFETY: disjoint ranges of the diagonal and of `kv` (as long as the matrix when
+            // given).
+            let d = unsafe { dp.slice(r.clone()) };
+            let mut kv = with_kv.then(|| unsafe { kvp.slice(r.clone()) });
+            for (k, i) in r.enumerate() {
+                let (mut di, mut ui) = (diag(i), Vector::ZERO);
+                for e in rows.start[i] as usize..rows.start[i + 1] as usize {
+                    let b = (rows.block[e] & !AT_JI) as usize;
+                    if b < springs {
+                        di -= off[b];
+                        if with_kv {
+                            if rows.block[e] & AT_JI == 0 {
+                                ui -= edge[b];
+                            } else {
+                                ui += edge[b];
+                            }
+                        }
+                    }
+                }
+                d[k] = di;
+                if let Some(kv) = kv.as_deref_mut() {
+                    kv[k] = ui;
+                }
+            }
+        });
     }
 
     /// The dense matrix (row-major, `3n × 3n`), for tests and small systems.

@@ -28,7 +28,7 @@
 //! them and the free part is preconditioned as the filtered conjugate gradients iterate on it.
 
 use super::{Product, SpringMatrix, for_each_rows};
-use crate::core::kernels::SharedMut;
+use crate::core::kernels::{self, SharedMut};
 use crate::math::{Matrix3, Scalar, Vector};
 
 /// A level stops being coarsened below this many nodes (solved densely), or when aggregation
@@ -42,6 +42,8 @@ const SHRINK: f64 = 0.7;
 /// from 29.0 to 22.0, the bench cloth from 50.3 to 37.9; 1.8–2.0 were level with 1.6 on the
 /// seed cloths and worse on the bench cloth (38.6, 42.0).
 const OMEGA_TIMES_E: Scalar = 1.6;
+/// Coarse rows per chunk of the first coarse level's sums (about 12 entries a row on a cloth).
+const GATHER_ROWS: usize = 128;
 /// Where a fine block lands: the coarse diagonal of its aggregate (both ends in one).
 const TO_DIAG: u32 = u32::MAX;
 
@@ -170,7 +172,15 @@ fn aggregate(start: &[u32], col: &[u32]) -> (Vec<u32>, usize) {
 /// [`setup`](Self::setup).
 #[derive(Clone, Debug, Default)]
 pub struct Multigrid {
-    pairs: Vec<(u32, u32)>,
+    /// The structure of the matrix analysed last ([`SpringMatrix`]'s name for it; 0: none).
+    structure: u64,
+    /// The first coarse level's entries as sums of the matrix's blocks: entry `e` (a coarse
+    /// row's diagonal, `e < count`, or its off-diagonal entry `e − count`) is the sum of the
+    /// sources `sources[start[e]..start[e + 1]]`, each a fine row `i < n` (its diagonal block)
+    /// or `n + 2k + side` (pair `k`'s block, transposed on side 1 unless symmetric), in the
+    /// order a scatter over the rows and then the pairs would add them.
+    gather_start: Vec<u32>,
+    gather: Vec<u32>,
     /// Where each pair's blocks `(i, j)` and `(j, i)` of the matrix land on the first
     /// coarse level.
     land_ij: Vec<u32>,
@@ -202,8 +212,8 @@ impl Multigrid {
 
     fn analyse(&mut self, a: &SpringMatrix) {
         let n = a.len();
-        self.pairs = a.pairs().to_vec();
-        let (start, col, ij, ji) = rows_of(n, &self.pairs);
+        self.structure = a.structure;
+        let (start, col, ij, ji) = rows_of(n, a.pairs());
         let mut levels = vec![Level {
             off: vec![Matrix3::ZERO; col.len()],
             diag: vec![Matrix3::ZERO; n],
@@ -274,11 +284,60 @@ impl Multigrid {
             l.z = vec![Vector::ZERO; m];
             l.t = vec![Vector::ZERO; m];
         }
+        self.gathers(&levels, a.pairs());
         let last = levels.last().map_or(0, Level::len);
         self.chol = vec![0.0; 9 * last * last];
         self.rhs = vec![0.0; 3 * last];
         self.levels = levels;
         self.analyses += 1;
+    }
+
+    /// The first coarse level's gather lists (see [`Multigrid::gather`]), from the finest
+    /// level's aggregates and where each pair lands.
+    fn gathers(&mut self, levels: &[Level], pairs: &[(u32, u32)]) {
+        let (start, list) = (&mut self.gather_start, &mut self.gather);
+        start.clear();
+        list.clear();
+        let (Some(fine), Some(coarse)) = (levels.first(), levels.get(1)) else {
+            return;
+        };
+        let (n, count) = (fine.len(), coarse.len());
+        assert!(
+            n + 2 * pairs.len() < u32::MAX as usize,
+            "too many blocks for the multigrid"
+        );
+        let (agg, land_ij, land_ji) = (&fine.agg, &self.land_ij, &self.land_ji);
+        let entry = move |to: u32, at: u32| -> usize {
+            if to == TO_DIAG {
+                agg[at as usize] as usize
+            } else {
+                count + to as usize
+            }
+        };
+        // Every source in the order a scatter adds it: rows, then pairs (side ij, side ji).
+        let sources = || {
+            (0..n)
+                .map(|i| (agg[i] as usize, i as u32))
+                .chain(pairs.iter().enumerate().flat_map(move |(k, &(i, j))| {
+                    [
+                        (entry(land_ij[k], i), (n + 2 * k) as u32),
+                        (entry(land_ji[k], j), (n + 2 * k + 1) as u32),
+                    ]
+                }))
+        };
+        start.resize(count + coarse.off.len() + 1, 0);
+        for (e, _) in sources() {
+            start[e + 1] += 1;
+        }
+        for e in 0..start.len() - 1 {
+            start[e + 1] += start[e];
+        }
+        list.resize(start[start.len() - 1] as usize, 0);
+        let mut fill = start.clone();
+        for (e, src) in sources() {
+            list[fill[e] as usize] = src;
+            fill[e] += 1;
+        }
     }
 
     /// Takes the values of `a`, with the particles whose `mask` is zero cut loose (see the
@@ -294,9 +353,7 @@ impl Multigrid {
     /// (tets' edges) are taken to hold tets.
     pub fn setup(&mut self, a: &SpringMatrix, mask: &[Scalar]) {
         let n = a.len();
-        if self.levels.first().map(Level::len) != Some(n)
-            || !a.matches_pairs(n, self.pairs.iter().copied())
-        {
+        if self.levels.first().map(Level::len) != Some(n) || self.structure != a.structure {
             self.analyse(a);
         }
         let sym = a.symmetric_prefix();
@@ -309,27 +366,55 @@ impl Multigrid {
         }
         fine.invert();
         if let Some(coarse) = rest.first_mut() {
-            coarse.diag.fill(Matrix3::ZERO);
-            coarse.off.fill(Matrix3::ZERO);
-            for (i, d) in a.diag.iter().enumerate() {
-                if mask[i] != 0.0 {
-                    coarse.diag[fine.agg[i] as usize] += *d;
-                }
-            }
-            for (k, (o, &(i, j))) in a.off.iter().zip(a.pairs()).enumerate() {
-                if mask[i as usize] == 0.0 || mask[j as usize] == 0.0 {
-                    continue;
-                }
-                let ot = if k < sym { *o } else { o.transpose() };
-                for (to, b, at) in [(self.land_ij[k], *o, i), (self.land_ji[k], ot, j)] {
-                    if to == TO_DIAG {
-                        coarse.diag[fine.agg[at as usize] as usize] += b;
+            // Each coarse row's entries summed from their sources, in chunks of coarse rows
+            // on the team (every entry's sum in its list's order: the same bits on any number
+            // of threads).
+            let (start, list, pairs) = (&self.gather_start, &self.gather, a.pairs());
+            let sum = |e: usize| {
+                let mut b = Matrix3::ZERO;
+                for &src in &list[start[e] as usize..start[e + 1] as usize] {
+                    let src = src as usize;
+                    if src < n {
+                        if mask[src] != 0.0 {
+                            b += a.diag[src];
+                        }
+                        continue;
+                    }
+                    let k = (src - n) / 2;
+                    let (i, j) = pairs[k];
+                    if mask[i as usize] == 0.0 || mask[j as usize] == 0.0 {
+                        continue;
+                    }
+                    let o = a.off[k];
+                    b += if src.is_multiple_of(2) || k < sym {
+                        o
                     } else {
-                        coarse.off[to as usize] += b;
+                        o.transpose()
+                    };
+                }
+                b
+            };
+            let count = coarse.len();
+            let (cd, co, cs) = (
+                SharedMut(coarse.diag.as_mut_ptr()),
+                SharedMut(coarse.off.as_mut_ptr()),
+                &coarse.start,
+            );
+            kernels::for_each_range(count, kernels::chunk_size(count, GATHER_ROWS), |rows| {
+                let entries = cs[rows.start] as usize..cs[rows.end] as usize;
+                // SAFETY: disjoint ranges of the coarse rows and of their entries.
+                let (diag, off) = unsafe { (cd.slice(rows.clone()), co.slice(entries.clone())) };
+                for (d, r) in diag.iter_mut().zip(rows) {
+                    *d = sum(r);
+                    if *d == Matrix3::ZERO {
+                        // An aggregate of cut-loose particles only: its own unknowns.
+                        *d = Matrix3::IDENTITY;
                     }
                 }
-            }
-            fill_empty(&mut coarse.diag);
+                for (o, e) in off.iter_mut().zip(entries) {
+                    *o = sum(count + e);
+                }
+            });
         }
         for l in 1..self.levels.len() {
             let (done, rest) = self.levels.split_at_mut(l + 1);
