@@ -61,6 +61,28 @@ pub struct Springs {
     bound: usize,
     /// The fast kernel's layout, built on the first evaluation after a change.
     rows: LazyRows,
+    /// Names the springs as they are now: see [`Springs::stamp`].
+    stamp: Stamp,
+}
+
+/// A number from a process-wide counter, new at every edit of the springs (0 for springs
+/// never edited), so that caches built from them (an implicit method's matrix) can tell in
+/// one comparison that nothing changed. Compared as always equal: equal springs are equal
+/// whatever their history.
+#[derive(Clone, Copy, Debug, Default)]
+struct Stamp(u64);
+
+impl Stamp {
+    fn new() -> Self {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        Self(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+impl PartialEq for Stamp {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 /// A [`SpringRows`] built when first needed; cloning or editing the springs drops it (it is
@@ -108,6 +130,7 @@ impl Springs {
         }
         self.bound = self.bound.max(i.max(j) + 1);
         self.rows = LazyRows::default();
+        self.stamp = Stamp::new();
     }
 
     /// Number of springs.
@@ -132,6 +155,7 @@ impl Springs {
         // `accumulate` (or exactly by `refresh`).
         self.bound = usize::MAX;
         self.rows = LazyRows::default();
+        self.stamp = Stamp::new();
         &mut self.springs
     }
 
@@ -140,6 +164,7 @@ impl Springs {
         self.damped = self.springs.iter().filter(|s| s.damping != 0.0).count();
         self.bound = self.max_index();
         self.rows = LazyRows::default();
+        self.stamp = Stamp::new();
     }
 
     /// Removes the spring at `index` (order of the others is kept).
@@ -147,6 +172,13 @@ impl Springs {
         let s = self.springs.remove(index);
         self.refresh();
         s
+    }
+
+    /// A number that changes whenever the springs may have (every `&mut` access gives a new
+    /// one, from a process-wide counter; 0 before any edit): springs with the stamp a cache
+    /// saw are the springs it was built from.
+    pub fn stamp(&self) -> u64 {
+        self.stamp.0
     }
 
     /// True when any spring has a damper.
@@ -328,6 +360,40 @@ impl Springs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A matrix takes the springs it matched by their stamp alone, and every edit that can
+    /// change their structure is seen: a pair's particles changed through the mutable slice,
+    /// a spring pushed or removed; a clone of the springs is the same structure, and a clone
+    /// edited apart is not.
+    #[test]
+    fn a_matrix_sees_every_edit_of_its_springs() {
+        use crate::core::solve::SpringMatrix;
+        let mut s = Springs::new();
+        for i in 0..4 {
+            s.push(i, i + 1, 1.0, 10.0, 0.0, SpringLaw::Hooke);
+        }
+        let a = SpringMatrix::new(5, &s);
+        assert!(a.matches(5, &s) && a.matches(5, &s));
+        assert!(!a.matches(6, &s), "another particle count");
+        let c = s.clone();
+        assert_eq!(c.stamp(), s.stamp());
+        assert!(a.matches(5, &c));
+        // A stiffness change through the slice: a new stamp, the same structure.
+        s.as_mut_slice()[0].k = 20.0;
+        assert_ne!(s.stamp(), c.stamp());
+        assert!(a.matches(5, &s));
+        s.as_mut_slice()[2].j = 0;
+        assert!(!a.matches(5, &s), "a pair's particle changed");
+        s.as_mut_slice()[2].j = 3;
+        assert!(a.matches(5, &s));
+        s.push(0, 4, 1.0, 10.0, 0.0, SpringLaw::Hooke);
+        assert!(!a.matches(5, &s), "a spring pushed");
+        s.remove(4);
+        assert!(a.matches(5, &s));
+        s.remove(1);
+        assert!(!a.matches(5, &s), "a spring removed");
+        assert!(a.matches(5, &c), "the clone kept its structure");
+    }
 
     #[test]
     fn zero_length_and_self_springs_exert_nothing() {

@@ -31,6 +31,7 @@
 //! `docs/BENCHMARKS.md` (implicit methods) for what it gained and what bounds it.
 
 use super::SpringMatrix;
+use crate::core::kernels::{self, SharedMut};
 use crate::math::{Scalar, Vector};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -65,6 +66,9 @@ pub(crate) struct BandCopy {
     offsets: Vec<usize>,
     /// Each pair's band and slot (its lower particle).
     place: Vec<(u32, u32)>,
+    /// The pairs of band `b`, in order: `by_band[band_start[b]..band_start[b + 1]]`.
+    by_band: Vec<u32>,
+    band_start: Vec<u32>,
     /// The largest offset.
     omax: usize,
     /// Band `b`'s component `c` of slot `p` (for `−omax ≤ p < n`: the slots before the first
@@ -112,6 +116,8 @@ impl BandCopy {
         self.usable = false;
         self.offsets.clear();
         self.place.clear();
+        self.by_band.clear();
+        self.band_start.clear();
         self.blocks.clear();
         let n = a.len();
         if n < min_rows.max(LANES) || a.symmetric_prefix() != a.off.len() || a.pairs.is_empty() {
@@ -137,6 +143,19 @@ impl BandCopy {
         self.place = (a.pairs.iter())
             .map(|&(i, j)| (band[&(i.abs_diff(j) as usize)], i.min(j)))
             .collect();
+        self.band_start = vec![0; self.offsets.len() + 1];
+        for &(b, _) in &self.place {
+            self.band_start[b as usize + 1] += 1;
+        }
+        for b in 0..self.offsets.len() {
+            self.band_start[b + 1] += self.band_start[b];
+        }
+        let mut fill = self.band_start.clone();
+        self.by_band = vec![0; self.place.len()];
+        for (k, &(b, _)) in self.place.iter().enumerate() {
+            self.by_band[fill[b as usize] as usize] = k as u32;
+            fill[b as usize] += 1;
+        }
         let omax = self.offsets.last().copied().unwrap_or(0);
         self.omax = omax;
         self.blocks.resize(6 * self.offsets.len() * (n + omax), 0.0);
@@ -149,18 +168,28 @@ impl BandCopy {
             .resize(len, 0.0);
     }
 
-    /// The blocks' values into the bands.
+    /// The blocks' values into the bands, a band at a time on the team (a band's columns
+    /// are written by its own pairs alone, in their order: the same bits on any number of
+    /// threads).
     fn fill(&mut self, a: &SpringMatrix) {
         let (m, omax) = (self.n + self.omax, self.omax);
-        self.blocks.fill(0.0);
-        for (o, &(b, p)) in a.off.iter().zip(&self.place) {
-            let v = [
-                o.x_axis.x, o.y_axis.y, o.z_axis.z, o.x_axis.y, o.x_axis.z, o.y_axis.z,
-            ];
-            for (c, v) in v.into_iter().enumerate() {
-                self.blocks[(6 * b as usize + c) * m + omax + p as usize] += v;
+        let blocks = SharedMut(self.blocks.as_mut_ptr());
+        let (by_band, start, place) = (&self.by_band, &self.band_start, &self.place);
+        kernels::for_each_chunk(self.offsets.len(), |b| {
+            // SAFETY: band `b`'s six columns, within `blocks` (`6 · bands · m` long), written
+            // by this job alone.
+            let cols = unsafe { blocks.slice(6 * b * m..6 * (b + 1) * m) };
+            cols.fill(0.0);
+            for &k in &by_band[start[b] as usize..start[b + 1] as usize] {
+                let (o, p) = (&a.off[k as usize], place[k as usize].1 as usize);
+                let v = [
+                    o.x_axis.x, o.y_axis.y, o.z_axis.z, o.x_axis.y, o.x_axis.z, o.y_axis.z,
+                ];
+                for (c, v) in v.into_iter().enumerate() {
+                    cols[c * m + omax + p] += v;
+                }
             }
-        }
+        });
     }
 
     /// The chunks' columns of positions, for the products of one solve's pass: the caller

@@ -146,6 +146,26 @@ pub struct SpringMatrix {
     structure: u64,
     /// Each spring's vector of the last [`fill_springs`](Self::fill_springs) (scratch).
     edge: Vec<Vector>,
+    /// The [`Springs::stamp`] of the springs [`matches`](Self::matches) last found this
+    /// structure in (0: none).
+    seen: Seen,
+}
+
+/// A stamp remembered through `&self` (the matrix is shared with the team while it is
+/// checked), cloned with its value.
+#[derive(Debug, Default)]
+struct Seen(std::sync::atomic::AtomicU64);
+
+impl Clone for Seen {
+    fn clone(&self) -> Self {
+        Self(self.get().into())
+    }
+}
+
+impl Seen {
+    fn get(&self) -> u64 {
+        self.0.load(std::sync::atomic::Ordering::Relaxed)
+    }
 }
 
 /// The next [`SpringMatrix::structure`].
@@ -174,6 +194,7 @@ impl SpringMatrix {
             symmetric: 0,
             structure: next_structure(),
             edge: vec![],
+            seen: Seen::default(),
         }
     }
 
@@ -196,15 +217,29 @@ impl SpringMatrix {
             && self.pairs.iter().copied().eq(pairs)
     }
 
-    /// True when this matrix has the structure of `springs` over `n` particles.
+    /// True when this matrix has the structure of `springs` over `n` particles: springs
+    /// whose [`stamp`](Springs::stamp) this matrix matched last are taken at once; others are
+    /// compared pair by pair (and their stamp remembered when they match).
     pub fn matches(&self, n: usize, springs: &Springs) -> bool {
-        self.diag.len() == n
-            && self.pairs.len() == springs.len()
+        if self.diag.len() != n {
+            return false;
+        }
+        let stamp = springs.stamp();
+        if stamp != 0 && self.seen.get() == stamp {
+            return true;
+        }
+        let same = self.pairs.len() == springs.len()
             && self
                 .pairs
                 .iter()
                 .zip(springs.as_slice())
-                .all(|(p, s)| p.0 == s.i && p.1 == s.j)
+                .all(|(p, s)| p.0 == s.i && p.1 == s.j);
+        if same {
+            self.seen
+                .0
+                .store(stamp, std::sync::atomic::Ordering::Relaxed);
+        }
+        same
     }
 
     /// Number of block rows.
