@@ -181,6 +181,10 @@ pub struct Multigrid {
     /// order a scatter over the rows and then the pairs would add them.
     gather_start: Vec<u32>,
     gather: Vec<u32>,
+    /// The finest level's aggregates' members, in order: aggregate `a`'s are
+    /// `members[members_start[a]..members_start[a + 1]]` (the restriction's gathers).
+    members_start: Vec<u32>,
+    members: Vec<u32>,
     /// Where each pair's blocks `(i, j)` and `(j, i)` of the matrix land on the first
     /// coarse level.
     land_ij: Vec<u32>,
@@ -298,10 +302,25 @@ impl Multigrid {
         let (start, list) = (&mut self.gather_start, &mut self.gather);
         start.clear();
         list.clear();
+        self.members_start.clear();
+        self.members.clear();
         let (Some(fine), Some(coarse)) = (levels.first(), levels.get(1)) else {
             return;
         };
         let (n, count) = (fine.len(), coarse.len());
+        self.members_start.resize(count + 1, 0);
+        for &a in &fine.agg {
+            self.members_start[a as usize + 1] += 1;
+        }
+        for a in 0..count {
+            self.members_start[a + 1] += self.members_start[a];
+        }
+        self.members.resize(n, 0);
+        let mut next = self.members_start.clone();
+        for (i, &a) in fine.agg.iter().enumerate() {
+            self.members[next[a as usize] as usize] = i as u32;
+            next[a as usize] += 1;
+        }
         assert!(
             n + 2 * pairs.len() < u32::MAX as usize,
             "too many blocks for the multigrid"
@@ -572,6 +591,25 @@ impl Multigrid {
                 fine.z.fill(Vector::ZERO);
                 fine.sweep(0..m);
                 fine.residual();
+            }
+            if l == 0 {
+                // Each aggregate's sum over its members in order (the order of a scatter over
+                // the rows), in chunks of aggregates on the team.
+                let (rp, t) = (SharedMut(coarse.r.as_mut_ptr()), &fine.t);
+                let (start, members) = (&self.members_start, &self.members);
+                let count = coarse.len();
+                kernels::for_each_range(count, kernels::chunk_size(count, GATHER_ROWS), |rows| {
+                    // SAFETY: disjoint ranges of the coarse level's `r`.
+                    let r = unsafe { rp.slice(rows.clone()) };
+                    for (r, a) in r.iter_mut().zip(rows) {
+                        let mut s = Vector::ZERO;
+                        for &i in &members[start[a] as usize..start[a + 1] as usize] {
+                            s += t[i as usize];
+                        }
+                        *r = s;
+                    }
+                });
+                continue;
             }
             coarse.r.fill(Vector::ZERO);
             for (t, &a) in fine.t.iter().zip(&fine.agg) {
