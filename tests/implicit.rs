@@ -916,7 +916,10 @@ fn dot64(u: &[Vector], v: &[Vector]) -> f64 {
 /// (`uᵀ B v = vᵀ B u`) and positive definite on the free degrees of freedom, zero on the
 /// cut-loose ones; and conjugate gradients with it converge to the solution block-Jacobi's
 /// converge to, with the true residual `b − A x` (the matrix's own product, computed apart
-/// from the solver) within the tolerance. On a 64² cloth and on a box of tets.
+/// from the solver) within the tolerance. On a 64² cloth and on a box of tets (blocks that
+/// are not symmetric). The symmetry check also checks the post-smoothing, which takes its
+/// residual from `A P` (the blocks summed by aggregate) instead of a product by `A`: a block
+/// transposed on the wrong side, or a column's cut-loose filter taken from the row, breaks it.
 #[test]
 fn multigrid_preconditioner_is_symmetric_positive_definite_and_solves() {
     let cloth = build::ClothParams::default().resized(64, 64);

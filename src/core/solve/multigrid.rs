@@ -17,17 +17,21 @@
 //! - **Cycle.** A symmetric V-cycle: a pre-smoothing step, the residual restricted (`Pᵀ`),
 //!   the coarse level's cycle, the correction prolonged (`P`), a post-smoothing step that is
 //!   the pre-smoothing's adjoint; a dense Cholesky solve on the coarsest level. The finest
-//!   level is smoothed by damped block-Jacobi (only the matrix's own product, no copy of its
-//!   rows; its weight is bounded in [`Multigrid::setup`]), the coarser ones by a forward and
-//!   a backward block Gauss–Seidel sweep. With convergent smoothers and symmetric positive
-//!   definite coarse solves the cycle is a symmetric positive definite operator — what
-//!   conjugate gradients needs of a preconditioner.
+//!   level is smoothed by damped block-Jacobi (its weight is bounded in
+//!   [`Multigrid::setup`]): the pre-smoothing's residual is one product by the matrix itself,
+//!   and the post-smoothing's needs none, since after the correction `z₁ = z₀ + P e` the
+//!   residual is the pre-smoothing's less `(A P) e` — and `A P`, the matrix's blocks summed
+//!   by the aggregate of their column, has a few blocks a row where `A` has a dozen. The
+//!   coarser levels are smoothed by a forward and a backward block Gauss–Seidel sweep. With
+//!   convergent smoothers and symmetric positive definite coarse solves the cycle is a
+//!   symmetric positive definite operator — what conjugate gradients needs of a
+//!   preconditioner.
 //!
 //! Pinned and prescribed particles (mask zero) are cut loose: their rows and columns are
 //! dropped and their diagonal blocks replaced by the identity, so the cycle returns zero for
 //! them and the free part is preconditioned as the filtered conjugate gradients iterate on it.
 
-use super::{Product, SpringMatrix, for_each_rows};
+use super::{AT_JI, Product, SpringMatrix, for_each_rows};
 use crate::core::kernels::{self, SharedMut};
 use crate::math::{Matrix3, Scalar, Vector};
 
@@ -185,6 +189,16 @@ pub struct Multigrid {
     /// `members[members_start[a]..members_start[a + 1]]` (the restriction's gathers).
     members_start: Vec<u32>,
     members: Vec<u32>,
+    /// The finest level's `A S P` (the matrix, times the cut-loose filter `S`, times the
+    /// prolongation) by rows, so that the post-smoothing needs no product by `A`: row `i`'s
+    /// entries are `ap_start[i]..ap_start[i + 1]`, each a coarse node `ap_col[e]` and a block
+    /// `ap[e]` summed from the sources `ap_sources[ap_source_start[e]..]` (encoded as in
+    /// [`Multigrid::gather`]).
+    ap_start: Vec<u32>,
+    ap_col: Vec<u32>,
+    ap: Vec<Matrix3>,
+    ap_source_start: Vec<u32>,
+    ap_sources: Vec<u32>,
     /// Where each pair's blocks `(i, j)` and `(j, i)` of the matrix land on the first
     /// coarse level.
     land_ij: Vec<u32>,
@@ -289,6 +303,7 @@ impl Multigrid {
             l.t = vec![Vector::ZERO; m];
         }
         self.gathers(&levels, a.pairs());
+        self.rows_by_aggregate(a, levels.first().map_or(&[][..], |l| &l.agg[..]));
         let last = levels.last().map_or(0, Level::len);
         self.chol = vec![0.0; 9 * last * last];
         self.rhs = vec![0.0; 3 * last];
@@ -359,6 +374,53 @@ impl Multigrid {
         }
     }
 
+    /// The structure of the finest level's `A S P` (see [`Multigrid::ap`]): each row's
+    /// sources (its diagonal block and its entries' blocks) grouped by the aggregate of their
+    /// column, the groups in the order of their aggregates, each group's sources in the row's
+    /// order.
+    fn rows_by_aggregate(&mut self, a: &SpringMatrix, agg: &[u32]) {
+        let (start, col, srcs, src_start) = (
+            &mut self.ap_start,
+            &mut self.ap_col,
+            &mut self.ap_sources,
+            &mut self.ap_source_start,
+        );
+        for v in [&mut *start, &mut *col, &mut *srcs, &mut *src_start] {
+            v.clear();
+        }
+        self.ap.clear();
+        if agg.is_empty() {
+            return;
+        }
+        let (n, rows) = (a.len(), &a.rows);
+        start.push(0);
+        src_start.push(0);
+        let mut row: Vec<(u32, u32)> = vec![];
+        for i in 0..n {
+            row.clear();
+            row.push((agg[i], i as u32));
+            for e in rows.start[i] as usize..rows.start[i + 1] as usize {
+                let (b, c) = (rows.block[e], rows.col[e]);
+                let side = u32::from(b & AT_JI != 0);
+                row.push((agg[c as usize], (n as u32) + 2 * (b & !AT_JI) + side));
+            }
+            // Stable: the row's order within each aggregate.
+            row.sort_by_key(|&(g, _)| g);
+            for (k, &(g, src)) in row.iter().enumerate() {
+                if k == 0 || row[k - 1].0 != g {
+                    if k > 0 {
+                        src_start.push(srcs.len() as u32);
+                    }
+                    col.push(g);
+                }
+                srcs.push(src);
+            }
+            src_start.push(srcs.len() as u32);
+            start.push(col.len() as u32);
+        }
+        self.ap.resize(col.len(), Matrix3::ZERO);
+    }
+
     /// Takes the values of `a`, with the particles whose `mask` is zero cut loose (see the
     /// module docs), and sums the coarse levels.
     ///
@@ -384,6 +446,40 @@ impl Multigrid {
             fine.diag[i] = if *m == 0.0 { Matrix3::IDENTITY } else { *d };
         }
         fine.invert();
+        // `A S P`, in chunks of rows on the team: a source counts when its column is free.
+        let (start, srcs, src_start) = (&self.ap_start, &self.ap_sources, &self.ap_source_start);
+        if !start.is_empty() {
+            let (pairs, app) = (a.pairs(), SharedMut(self.ap.as_mut_ptr()));
+            for_each_rows(n, |rows| {
+                let entries = start[rows.start] as usize..start[rows.end] as usize;
+                // SAFETY: disjoint ranges of `ap`, the entries of disjoint rows.
+                let ap = unsafe { app.slice(entries.clone()) };
+                for (b, e) in ap.iter_mut().zip(entries) {
+                    let mut sum = Matrix3::ZERO;
+                    for &src in &srcs[src_start[e] as usize..src_start[e + 1] as usize] {
+                        let src = src as usize;
+                        if src < n {
+                            if mask[src] != 0.0 {
+                                sum += a.diag[src];
+                            }
+                            continue;
+                        }
+                        let (k, side) = ((src - n) / 2, (src - n) % 2);
+                        let (i, j) = pairs[k];
+                        if mask[if side == 0 { j } else { i } as usize] == 0.0 {
+                            continue;
+                        }
+                        let o = a.off[k];
+                        sum += if side == 0 || k < sym {
+                            o
+                        } else {
+                            o.transpose()
+                        };
+                    }
+                    *b = sum;
+                }
+            });
+        }
         if let Some(coarse) = rest.first_mut() {
             // Each coarse row's entries summed from their sources, in chunks of coarse rows
             // on the team (every entry's sum in its list's order: the same bits on any number
@@ -627,24 +723,29 @@ impl Multigrid {
                 let m = fine.len();
                 fine.sweep((0..m).rev());
             } else {
-                let (zp, agg) = (SharedMut(fine.z.as_mut_ptr()), &fine.agg);
+                // The prolongation and the post-smoothing in one pass, without a product by
+                // `A`: with `z₀` the pre-smoothing's answer and `t = S (r − A z₀)` its
+                // residual, the corrected `z₁ = z₀ + S P e` has, on a free row,
+                // `r − A z₁ = t − (A S P) e`. Masked particles: r = 0, D⁻¹ = I and z = 0,
+                // so they stay at zero.
+                let (agg, inv, t) = (&fine.agg, &fine.inv, &fine.t);
+                let (z0, ec) = (&fine.z, &coarse.z);
+                let (start, col, ap) = (&self.ap_start, &self.ap_col, &self.ap);
+                let zp = SharedMut(z.as_mut_ptr());
                 for_each_rows(fine.len(), |rows| {
-                    // SAFETY: disjoint ranges of the level's `z`.
+                    // SAFETY: disjoint ranges of `z`, at least as long as the level.
                     let z = unsafe { zp.slice(rows.clone()) };
                     for (z, i) in z.iter_mut().zip(rows) {
-                        *z += coarse.z[agg[i] as usize] * mask[i];
+                        let mut ape = Vector::ZERO;
+                        for e in start[i] as usize..start[i + 1] as usize {
+                            ape += ap[e] * ec[col[e] as usize];
+                        }
+                        let z1 = z0[i] + ec[agg[i] as usize] * mask[i];
+                        *z = z1 + inv[i] * (t[i] - ape) * (w * mask[i]);
                     }
                 });
             }
         }
-        let fine = &self.levels[0];
-        // Masked particles: r = 0, D⁻¹ = I and z = 0, so they stay at zero.
-        a.mul_map(
-            &fine.z,
-            z,
-            |i, az| fine.z[i] + fine.inv[i] * (r[i] - az) * (w * mask[i]),
-            None,
-        );
     }
 }
 
