@@ -449,34 +449,17 @@ impl Multigrid {
         // `A S P`, in chunks of rows on the team: a source counts when its column is free.
         let (start, srcs, src_start) = (&self.ap_start, &self.ap_sources, &self.ap_source_start);
         if !start.is_empty() {
-            let (pairs, app) = (a.pairs(), SharedMut(self.ap.as_mut_ptr()));
+            let app = SharedMut(self.ap.as_mut_ptr());
             for_each_rows(n, |rows| {
                 let entries = start[rows.start] as usize..start[rows.end] as usize;
                 // SAFETY: disjoint ranges of `ap`, the entries of disjoint rows.
                 let ap = unsafe { app.slice(entries.clone()) };
                 for (b, e) in ap.iter_mut().zip(entries) {
-                    let mut sum = Matrix3::ZERO;
-                    for &src in &srcs[src_start[e] as usize..src_start[e + 1] as usize] {
-                        let src = src as usize;
-                        if src < n {
-                            if mask[src] != 0.0 {
-                                sum += a.diag[src];
-                            }
-                            continue;
-                        }
-                        let (k, side) = ((src - n) / 2, (src - n) % 2);
-                        let (i, j) = pairs[k];
-                        if mask[if side == 0 { j } else { i } as usize] == 0.0 {
-                            continue;
-                        }
-                        let o = a.off[k];
-                        sum += if side == 0 || k < sym {
-                            o
-                        } else {
-                            o.transpose()
-                        };
-                    }
-                    *b = sum;
+                    let sources = &srcs[src_start[e] as usize..src_start[e + 1] as usize];
+                    // The pair's block counts when its column is free.
+                    *b = sum_sources(a, mask, sources, |i, j, side| {
+                        mask[if side == 0 { j } else { i }] != 0.0
+                    });
                 }
             });
         }
@@ -484,30 +467,11 @@ impl Multigrid {
             // Each coarse row's entries summed from their sources, in chunks of coarse rows
             // on the team (every entry's sum in its list's order: the same bits on any number
             // of threads).
-            let (start, list, pairs) = (&self.gather_start, &self.gather, a.pairs());
+            let (start, list) = (&self.gather_start, &self.gather);
             let sum = |e: usize| {
-                let mut b = Matrix3::ZERO;
-                for &src in &list[start[e] as usize..start[e + 1] as usize] {
-                    let src = src as usize;
-                    if src < n {
-                        if mask[src] != 0.0 {
-                            b += a.diag[src];
-                        }
-                        continue;
-                    }
-                    let k = (src - n) / 2;
-                    let (i, j) = pairs[k];
-                    if mask[i as usize] == 0.0 || mask[j as usize] == 0.0 {
-                        continue;
-                    }
-                    let o = a.off[k];
-                    b += if src.is_multiple_of(2) || k < sym {
-                        o
-                    } else {
-                        o.transpose()
-                    };
-                }
-                b
+                let sources = &list[start[e] as usize..start[e + 1] as usize];
+                // The pair's block counts when both its particles are free (`Pᵀ S A S P`).
+                sum_sources(a, mask, sources, |i, j, _| mask[i] != 0.0 && mask[j] != 0.0)
             };
             let count = coarse.len();
             let (cd, co, cs) = (
@@ -747,6 +711,40 @@ impl Multigrid {
             }
         }
     }
+}
+
+/// The sum of `a`'s blocks named by `sources` (encoded as in [`Multigrid::gather`]): a row's
+/// diagonal block when its particle is free, pair `k = (i, j)`'s block on side `s` (transposed
+/// on side 1 unless symmetric) when `counts(i, j, s)`; in the sources' order.
+fn sum_sources(
+    a: &SpringMatrix,
+    mask: &[Scalar],
+    sources: &[u32],
+    counts: impl Fn(usize, usize, usize) -> bool,
+) -> Matrix3 {
+    let (n, sym) = (a.len(), a.symmetric_prefix());
+    let mut sum = Matrix3::ZERO;
+    for &src in sources {
+        let src = src as usize;
+        if src < n {
+            if mask[src] != 0.0 {
+                sum += a.diag[src];
+            }
+            continue;
+        }
+        let (k, side) = ((src - n) / 2, (src - n) % 2);
+        let (i, j) = a.pairs[k];
+        if !counts(i as usize, j as usize, side) {
+            continue;
+        }
+        let o = a.off[k];
+        sum += if side == 0 || k < sym {
+            o
+        } else {
+            o.transpose()
+        };
+    }
+    sum
 }
 
 /// Aggregates of cut-loose particles only: their own unknowns, decoupled.
