@@ -143,19 +143,10 @@ impl BandCopy {
         self.place = (a.pairs.iter())
             .map(|&(i, j)| (band[&(i.abs_diff(j) as usize)], i.min(j)))
             .collect();
-        self.band_start = vec![0; self.offsets.len() + 1];
-        for &(b, _) in &self.place {
-            self.band_start[b as usize + 1] += 1;
-        }
-        for b in 0..self.offsets.len() {
-            self.band_start[b + 1] += self.band_start[b];
-        }
-        let mut fill = self.band_start.clone();
-        self.by_band = vec![0; self.place.len()];
-        for (k, &(b, _)) in self.place.iter().enumerate() {
-            self.by_band[fill[b as usize] as usize] = k as u32;
-            fill[b as usize] += 1;
-        }
+        (self.band_start, self.by_band) = super::group_by(
+            self.offsets.len(),
+            (self.place.iter().enumerate()).map(|(k, &(b, _))| (b as usize, k as u32)),
+        );
         let omax = self.offsets.last().copied().unwrap_or(0);
         self.omax = omax;
         self.blocks.resize(6 * self.offsets.len() * (n + omax), 0.0);

@@ -96,6 +96,28 @@ impl Clone for Partials {
     }
 }
 
+/// `items` grouped by key (below `groups`), each group in the items' order (a stable counting
+/// sort): group `g` is `list[start[g]..start[g + 1]]`; returns `(start, list)`.
+pub(crate) fn group_by(
+    groups: usize,
+    items: impl Iterator<Item = (usize, u32)> + Clone,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; groups + 1];
+    for (g, _) in items.clone() {
+        start[g + 1] += 1;
+    }
+    for g in 0..groups {
+        start[g + 1] += start[g];
+    }
+    let mut list = vec![0; start[groups] as usize];
+    let mut fill = start.clone();
+    for (g, item) in items {
+        list[fill[g] as usize] = item;
+        fill[g] += 1;
+    }
+    (start, list)
+}
+
 /// The chunking of a system of `n` rows for the solvers' passes: `(rows per chunk, chunks)`.
 pub(crate) fn chunking(n: usize) -> (usize, usize) {
     // Whole groups of the packed product's lanes.
@@ -348,8 +370,9 @@ impl SpringMatrix {
             kv.as_ref().is_none_or(|kv| kv.len() >= n),
             "kv shorter than the matrix"
         );
-        self.edge
-            .resize(if with_kv { springs } else { 0 }, Vector::ZERO);
+        if with_kv {
+            self.edge.resize(springs, Vector::ZERO);
+        }
         let (off, edge) = (
             SharedMut(self.off.as_mut_ptr()),
             SharedMut(self.edge.as_mut_ptr()),

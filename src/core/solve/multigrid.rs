@@ -323,19 +323,10 @@ impl Multigrid {
             return;
         };
         let (n, count) = (fine.len(), coarse.len());
-        self.members_start.resize(count + 1, 0);
-        for &a in &fine.agg {
-            self.members_start[a as usize + 1] += 1;
-        }
-        for a in 0..count {
-            self.members_start[a + 1] += self.members_start[a];
-        }
-        self.members.resize(n, 0);
-        let mut next = self.members_start.clone();
-        for (i, &a) in fine.agg.iter().enumerate() {
-            self.members[next[a as usize] as usize] = i as u32;
-            next[a as usize] += 1;
-        }
+        (self.members_start, self.members) = super::group_by(
+            count,
+            (fine.agg.iter().enumerate()).map(|(i, &a)| (a as usize, i as u32)),
+        );
         assert!(
             n + 2 * pairs.len() < u32::MAX as usize,
             "too many blocks for the multigrid"
@@ -349,7 +340,7 @@ impl Multigrid {
             }
         };
         // Every source in the order a scatter adds it: rows, then pairs (side ij, side ji).
-        let sources = || {
+        let sources =
             (0..n)
                 .map(|i| (agg[i] as usize, i as u32))
                 .chain(pairs.iter().enumerate().flat_map(move |(k, &(i, j))| {
@@ -357,21 +348,8 @@ impl Multigrid {
                         (entry(land_ij[k], i), (n + 2 * k) as u32),
                         (entry(land_ji[k], j), (n + 2 * k + 1) as u32),
                     ]
-                }))
-        };
-        start.resize(count + coarse.off.len() + 1, 0);
-        for (e, _) in sources() {
-            start[e + 1] += 1;
-        }
-        for e in 0..start.len() - 1 {
-            start[e + 1] += start[e];
-        }
-        list.resize(start[start.len() - 1] as usize, 0);
-        let mut fill = start.clone();
-        for (e, src) in sources() {
-            list[fill[e] as usize] = src;
-            fill[e] += 1;
-        }
+                }));
+        (*start, *list) = super::group_by(count + coarse.off.len(), sources);
     }
 
     /// The structure of the finest level's `A S P` (see [`Multigrid::ap`]): each row's
@@ -485,11 +463,8 @@ impl Multigrid {
                 let (diag, off) = unsafe { (cd.slice(rows.clone()), co.slice(entries.clone())) };
                 for (d, r) in diag.iter_mut().zip(rows) {
                     *d = sum(r);
-                    if *d == Matrix3::ZERO {
-                        // An aggregate of cut-loose particles only: its own unknowns.
-                        *d = Matrix3::IDENTITY;
-                    }
                 }
+                fill_empty(diag);
                 for (o, e) in off.iter_mut().zip(entries) {
                     *o = sum(count + e);
                 }
