@@ -41,6 +41,7 @@
 //! the motion it had at the search, relative to the surface's mean (a Verlet list along the
 //! motion: see [`AHEAD`]), and the patches it culled stay flat.
 
+mod distance;
 mod tree;
 
 use crate::math::{Scalar, ToScalar, Vector};
@@ -381,6 +382,10 @@ pub struct SelfContact {
 struct Scratch {
     p0: Vec<DVec3>,
     u: Vec<DVec3>,
+    /// The pass's length, and each particle's squared path length over it, `|u h|²`
+    /// (kept up to date with `u`, by [`Scratch::touch`] and after the impact zones).
+    h: f64,
+    step2: Vec<f64>,
     /// End velocities of the surface's particles.
     vel: Vec<DVec3>,
     w: Vec<f64>,
@@ -433,6 +438,9 @@ impl Scratch {
     /// Notes a change to the average velocities of `ids`.
     fn touch(&mut self, ids: &[u32; 4]) {
         self.edits += 1;
+        for &i in ids {
+            self.step2[i as usize] = (self.u[i as usize] * self.h).length_squared();
+        }
         if self.moved_all {
             return;
         }
@@ -453,11 +461,21 @@ impl Scratch {
     }
 }
 
-/// A point–triangle (`[p, a, b, c]`) or edge–edge (`[a, b, c, d]`) pair.
+/// A point–triangle (`[p, a, b, c]`) or edge–edge (`[a, b, c, d]`) pair, by its four
+/// particles (looked up once, when a walk finds it: every pass reads them for every
+/// candidate).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Pair {
-    PointTriangle(u32, u32),
-    EdgeEdge(u32, u32),
+    PointTriangle([u32; 4]),
+    EdgeEdge([u32; 4]),
+}
+
+impl Pair {
+    fn ids(self) -> [u32; 4] {
+        match self {
+            Pair::PointTriangle(ids) | Pair::EdgeEdge(ids) => ids,
+        }
+    }
 }
 
 /// Four particles and their weights: the pair's relative position is `Σ wᵢ xᵢ`.
@@ -585,6 +603,8 @@ impl SelfContact {
         let s = &mut self.s;
         s.p0.resize(n, DVec3::ZERO);
         s.u.resize(n, DVec3::ZERO);
+        s.step2.resize(n, 0.0);
+        s.h = h;
         s.vel.resize(n, DVec3::ZERO);
         s.w.resize(n, 0.0);
         s.clock += h;
@@ -600,6 +620,7 @@ impl SelfContact {
             let p0 = to_d(x0[i]);
             s.p0[i] = p0;
             s.u[i] = (to_d(x[i]) - p0) / h;
+            s.step2[i] = (s.u[i] * h).length_squared();
             s.vel[i] = to_d(v[i]);
             s.w[i] = if self.support.get(i).copied().unwrap_or(false) {
                 inv_mass[i] as f64 / SUPPORT_MASS
@@ -706,7 +727,7 @@ impl SelfContact {
         s.budget.resize(n, Scalar::INFINITY);
         let (near, band) = (PROXIMITY * ctx.thick, PASS_TRAVEL * ctx.thick);
         for &(pair, d0) in &s.pairs {
-            let ids = ctx.stencil_ids(pair);
+            let ids = pair.ids();
             let [a, b, c, d] = ids.map(|i| s.travel[i as usize]);
             let closing = match pair {
                 Pair::PointTriangle(..) => a + b.max(c).max(d),
@@ -838,7 +859,7 @@ impl Ctx<'_> {
         let slack = 2.0 * 3f64.sqrt() * grow;
         let mut pairs = std::mem::take(&mut s.pairs);
         pairs.retain(|&(pair, d0)| {
-            let ids = self.stencil_ids(pair);
+            let ids = pair.ids();
             let w = ids.map(|i| s.tube[i as usize].1);
             let apart = |a: &[DVec3], b: &[DVec3]| {
                 a.iter()
@@ -909,8 +930,16 @@ impl Ctx<'_> {
             &self.surf.triangles,
             &self.surf.edges,
             resume,
-            |p, t| pairs.borrow_mut().push((Pair::PointTriangle(p, t), 0.0)),
-            |e, f| pairs.borrow_mut().push((Pair::EdgeEdge(e, f), 0.0)),
+            |p, t| {
+                let t = self.surf.triangles[t as usize];
+                let ids = [p, t[0], t[1], t[2]];
+                pairs.borrow_mut().push((Pair::PointTriangle(ids), 0.0))
+            },
+            |e, f| {
+                let (e, f) = (self.surf.edges[e as usize], self.surf.edges[f as usize]);
+                let ids = [e[0], e[1], f[0], f[1]];
+                pairs.borrow_mut().push((Pair::EdgeEdge(ids), 0.0))
+            },
         );
         s.pairs = pairs.into_inner();
         // Headroom of half what a walk found: the count wanders as a resting body settles,
@@ -922,12 +951,51 @@ impl Ctx<'_> {
 
     /// The distance at the start of the pass (fixed for the pass: the start does not move) of
     /// each candidate pair from index `from` on.
+    ///
+    /// Four pairs of a kind at a time ([`distance`]): point–triangle and edge–edge pairs are
+    /// set aside into their own batch as they come, and a batch's distances written back
+    /// when it is full (the last ones, part full, at the end).
     fn start_distances(&self, s: &mut Scratch, from: usize) {
+        const L: usize = distance::LANES;
+        // Per kind (point–triangle, edge–edge): the batch's positions, its pairs' indices,
+        // and how many it holds.
+        let mut y = [[[DVec3::ZERO; 4]; L]; 2];
+        let mut at = [[0usize; L]; 2];
+        let mut held = [0usize; 2];
+        let flush = |pairs: &mut [(Pair, f64)],
+                     kind: usize,
+                     y: &mut [[DVec3; 4]; L],
+                     at: &[usize; L],
+                     n: usize| {
+            // Unused lanes repeat the first pair.
+            for q in n..L {
+                y[q] = y[0];
+            }
+            let d = if kind == 0 {
+                distance::point_triangle(y)
+            } else {
+                distance::edge_edge(y)
+            };
+            for q in 0..n {
+                pairs[at[q]].1 = d[q];
+            }
+        };
         for k in from..s.pairs.len() {
             let pair = s.pairs[k].0;
-            let ids = self.stencil_ids(pair);
-            let y = Self::positions(ids, |i| s.p0[i]);
-            s.pairs[k].1 = Self::closest(pair, y).1;
+            let kind = matches!(pair, Pair::EdgeEdge(..)) as usize;
+            let n = held[kind];
+            y[kind][n] = pair.ids().map(|i| s.p0[i as usize]);
+            at[kind][n] = k;
+            held[kind] = n + 1;
+            if n + 1 == L {
+                flush(&mut s.pairs, kind, &mut y[kind], &at[kind], L);
+                held[kind] = 0;
+            }
+        }
+        for kind in 0..2 {
+            if held[kind] > 0 {
+                flush(&mut s.pairs, kind, &mut y[kind], &at[kind], held[kind]);
+            }
         }
     }
 
@@ -935,7 +1003,7 @@ impl Ctx<'_> {
     /// of a point of the first part plus that of the second (a bound: the closest points move
     /// no more than the fastest vertex of their part).
     fn reach(&self, s: &Scratch, pair: Pair, ids: [u32; 4]) -> f64 {
-        let travel = |i: u32| (s.u[i as usize] * self.h).length_squared();
+        let travel = |i: u32| s.step2[i as usize];
         let (a, b) = match pair {
             Pair::PointTriangle(..) => (
                 travel(ids[0]),
@@ -947,19 +1015,6 @@ impl Ctx<'_> {
             ),
         };
         a.sqrt() + b.sqrt()
-    }
-
-    fn stencil_ids(&self, pair: Pair) -> [u32; 4] {
-        match pair {
-            Pair::PointTriangle(p, t) => {
-                let t = self.surf.triangles[t as usize];
-                [p, t[0], t[1], t[2]]
-            }
-            Pair::EdgeEdge(e, f) => {
-                let (e, f) = (self.surf.edges[e as usize], self.surf.edges[f as usize]);
-                [e[0], e[1], f[0], f[1]]
-            }
-        }
     }
 
     /// The pair's closest points at positions `y` (the pair's four points): the stencil
@@ -1048,7 +1103,7 @@ impl Ctx<'_> {
     }
 
     fn proximity_impulse(&self, s: &mut Scratch, pair: Pair) -> bool {
-        let ids = self.stencil_ids(pair);
+        let ids = pair.ids();
         let y = Self::positions(ids, |i| s.p0[i]);
         let (wt, d, nrm) = Self::closest(pair, y);
         if d >= PROXIMITY * self.thick || !Self::proper(pair, &wt) {
@@ -1077,7 +1132,7 @@ impl Ctx<'_> {
     }
 
     fn end_separation(&self, s: &mut Scratch, pair: Pair, d0: f64) -> bool {
-        let ids = self.stencil_ids(pair);
+        let ids = pair.ids();
         if d0 - self.reach(s, pair, ids) >= self.thick {
             return false;
         }
@@ -1102,7 +1157,7 @@ impl Ctx<'_> {
     /// The earliest contact of the pair over the step: (fraction of the step, the stencil at
     /// that instant, the unit normal).
     fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
-        let ids = self.stencil_ids(pair);
+        let ids = pair.ids();
         let tol = touch_tolerance(self.thick);
         if d0 - self.reach(s, pair, ids) > tol {
             return None;
@@ -1173,7 +1228,7 @@ impl Ctx<'_> {
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
             if self.ccd(s, pair, d0).is_some() {
-                hits.push(self.stencil_ids(pair));
+                hits.push(pair.ids());
             }
         }
         s.hits = hits;
@@ -1238,6 +1293,7 @@ impl Ctx<'_> {
                 z.xc + z.uc * self.h + turn * (s.p0[i] - z.xc)
             };
             s.u[i] = (new_end - s.p0[i]) / self.h;
+            s.step2[i] = (s.u[i] * self.h).length_squared();
         }
         s.edits += 1;
         s.moved_all = true;
