@@ -48,7 +48,7 @@ use crate::math::{Scalar, ToScalar, Vector};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::time::{Duration, Instant};
-use tree::SurfaceTree;
+use tree::{Found, SurfaceTree};
 
 /// Settings of a surface's contact with itself and with other such surfaces.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -925,23 +925,23 @@ impl Ctx<'_> {
     /// Walks the tree (all of it, or with `resume` the nodes no longer flat) and appends the
     /// pairs it finds to the candidates (distance still to be set).
     fn walk(&self, s: &mut Scratch, resume: bool) {
-        let pairs = std::cell::RefCell::new(std::mem::take(&mut s.pairs));
-        s.tree.search(
-            &self.surf.triangles,
-            &self.surf.edges,
-            resume,
-            |p, t| {
-                let t = self.surf.triangles[t as usize];
-                let ids = [p, t[0], t[1], t[2]];
-                pairs.borrow_mut().push((Pair::PointTriangle(ids), 0.0))
-            },
-            |e, f| {
-                let (e, f) = (self.surf.edges[e as usize], self.surf.edges[f as usize]);
-                let ids = [e[0], e[1], f[0], f[1]];
-                pairs.borrow_mut().push((Pair::EdgeEdge(ids), 0.0))
-            },
-        );
-        s.pairs = pairs.into_inner();
+        let (triangles, edges) = (&self.surf.triangles, &self.surf.edges);
+        let pairs = &mut s.pairs;
+        s.tree.search(triangles, edges, resume, |found| {
+            pairs.push((
+                match found {
+                    Found::PointTriangle(p, t) => {
+                        let t = triangles[t as usize];
+                        Pair::PointTriangle([p, t[0], t[1], t[2]])
+                    }
+                    Found::EdgeEdge(e, f) => {
+                        let (e, f) = (edges[e as usize], edges[f as usize]);
+                        Pair::EdgeEdge([e[0], e[1], f[0], f[1]])
+                    }
+                },
+                0.0,
+            ))
+        });
         // Headroom of half what a walk found: the count wanders as a resting body settles,
         // and a pass should not allocate each time it passes the last largest.
         let want = s.pairs.len() + s.pairs.len() / 2;

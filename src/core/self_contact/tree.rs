@@ -331,6 +331,13 @@ fn all_bits(
     }
 }
 
+/// What a search finds: a vertex and a triangle, or two edges (by index).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Found {
+    PointTriangle(u32, u32),
+    EdgeEdge(u32, u32),
+}
+
 /// A box in `f32`.
 type Box32 = (Vec3A, Vec3A);
 
@@ -971,8 +978,7 @@ impl SurfaceTree {
         triangles: &[[u32; 3]],
         edges: &[[u32; 2]],
         resume: bool,
-        mut pt: impl FnMut(u32, u32),
-        mut ee: impl FnMut(u32, u32),
+        mut found: impl FnMut(Found),
     ) {
         self.triangle_pairs = 0;
         if self.nodes.is_empty() {
@@ -989,38 +995,6 @@ impl SurfaceTree {
             self.failed.clear();
             stack.push((0, 0, false));
         }
-        let mut pair = |me: &Self, t: u32, u: u32| {
-            let (tb, ub) = (&me.tbox[t as usize], &me.tbox[u as usize]);
-            if !overlap32(tb, ub) {
-                return;
-            }
-            let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
-            for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
-                for &p in &me.owned_vertices[own as usize] {
-                    if p != NONE && !other_tri.contains(&p) && overlap32(&me.vbox[p as usize], ob) {
-                        pt(p, other);
-                    }
-                }
-            }
-            for &e in &me.owned_edges[t as usize] {
-                if e == NONE {
-                    continue;
-                }
-                let (ea, eb) = (edges[e as usize], &me.ebox[e as usize]);
-                for &f in &me.owned_edges[u as usize] {
-                    if f == NONE {
-                        continue;
-                    }
-                    let fa = edges[f as usize];
-                    if !fa.contains(&ea[0])
-                        && !fa.contains(&ea[1])
-                        && overlap32(eb, &me.ebox[f as usize])
-                    {
-                        ee(e, f);
-                    }
-                }
-            }
-        };
         let mut tests = 0u64;
         while let Some((a, b, keep)) = stack.pop() {
             let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
@@ -1034,7 +1008,7 @@ impl SurfaceTree {
                     for i in 0..ts.len() {
                         for j in i + 1..ts.len() {
                             tests += 1;
-                            pair(self, ts[i], ts[j]);
+                            self.pair(triangles, edges, ts[i], ts[j], &mut found);
                         }
                     }
                 } else {
@@ -1053,7 +1027,7 @@ impl SurfaceTree {
                     for &t in &self.order[na.start as usize..na.end as usize] {
                         for &u in &self.order[nb.start as usize..nb.end as usize] {
                             tests += 1;
-                            pair(self, t, u);
+                            self.pair(triangles, edges, t, u, &mut found);
                         }
                     }
                 }
@@ -1078,6 +1052,50 @@ impl SurfaceTree {
         }
         self.stack = stack;
         self.triangle_pairs = tests;
+    }
+
+    /// The vertex–triangle and edge–edge pairs of triangles `t` and `u` whose boxes overlap,
+    /// each vertex and edge taken by the one triangle that owns it, pairs that share a
+    /// particle left out.
+    #[inline(always)]
+    fn pair(
+        &self,
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
+        t: u32,
+        u: u32,
+        found: &mut impl FnMut(Found),
+    ) {
+        let (tb, ub) = (&self.tbox[t as usize], &self.tbox[u as usize]);
+        if !overlap32(tb, ub) {
+            return;
+        }
+        let (tt, tu) = (triangles[t as usize], triangles[u as usize]);
+        for (own, other, other_tri, ob) in [(t, u, tu, ub), (u, t, tt, tb)] {
+            for &p in &self.owned_vertices[own as usize] {
+                if p != NONE && !other_tri.contains(&p) && overlap32(&self.vbox[p as usize], ob) {
+                    found(Found::PointTriangle(p, other));
+                }
+            }
+        }
+        for &e in &self.owned_edges[t as usize] {
+            if e == NONE {
+                continue;
+            }
+            let (ea, eb) = (edges[e as usize], &self.ebox[e as usize]);
+            for &f in &self.owned_edges[u as usize] {
+                if f == NONE {
+                    continue;
+                }
+                let fa = edges[f as usize];
+                if !fa.contains(&ea[0])
+                    && !fa.contains(&ea[1])
+                    && overlap32(eb, &self.ebox[f as usize])
+                {
+                    found(Found::EdgeEdge(e, f));
+                }
+            }
+        }
     }
 }
 
@@ -1327,19 +1345,16 @@ mod tests {
         tree.refit(tris, &surf.edges, m);
         let (mut pt, mut ee) = (BTreeSet::new(), BTreeSet::new());
         let (mut npt, mut nee) = (0, 0);
-        tree.search(
-            tris,
-            &surf.edges,
-            false,
-            |p, t| {
+        tree.search(tris, &surf.edges, false, |found| match found {
+            Found::PointTriangle(p, t) => {
                 npt += 1;
                 pt.insert((p, t));
-            },
-            |e, f| {
+            }
+            Found::EdgeEdge(e, f) => {
                 nee += 1;
                 ee.insert((e.min(f), e.max(f)));
-            },
-        );
+            }
+        });
         assert_eq!(npt + nee, pt.len() + ee.len(), "a pair was reported twice");
         TESTED.with(|c| c.set(tree.triangle_pairs));
         (pt, ee)
