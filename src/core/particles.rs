@@ -915,9 +915,14 @@ impl OdeSystem<ParticleState> for ParticleModel {
     /// Colliders (continuous against each), then the surface against itself when its parts
     /// may have come closer by half its thickness since the last pass.
     fn resolve_contacts(&mut self, t: Scalar, h: Scalar, state: &mut ParticleState) {
-        for c in &self.colliders {
-            c.resolve(t, h, &mut state.x, &mut state.v, &self.inv_mass);
-        }
+        crate::core::collide::resolve_all(
+            &self.colliders,
+            t,
+            h,
+            &mut state.x,
+            &mut state.v,
+            &self.inv_mass,
+        );
         // Colliders move free particles only: pins written just before still hold.
         if self.self_contact.is_none() && self.pins_held.get(&state.x) == PinsHeld::APPLIED {
             self.pins_held.set(PinsHeld::KEPT, &state.x);

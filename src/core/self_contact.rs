@@ -44,6 +44,7 @@
 mod distance;
 mod tree;
 
+use crate::core::kernels::{SharedMut, for_each_range};
 use crate::math::{Scalar, ToScalar, Vector};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -750,6 +751,70 @@ impl SelfContact {
     }
 }
 
+/// Candidates a chunk of the team's passes over them holds (tens of microseconds of work).
+const PAIR_CHUNK: usize = 1024;
+
+/// The start distances of `pairs` at positions `p0`, four pairs of a kind at a time
+/// ([`distance`]): point–triangle and edge–edge pairs are set aside into their own batch as
+/// they come, and a batch's distances written back when it is full (the last ones, part full,
+/// at the end). Each lane's distance is its own pair's alone, so the bits do not depend on
+/// how the pairs are cut into chunks or batched.
+fn start_distances(pairs: &mut [(Pair, f64)], p0: &[DVec3]) {
+    const L: usize = distance::LANES;
+    // Per kind (point–triangle, edge–edge): the batch's positions, its pairs' indices, and
+    // how many it holds.
+    let mut y = [[[DVec3::ZERO; 4]; L]; 2];
+    let mut at = [[0usize; L]; 2];
+    let mut held = [0usize; 2];
+    let flush = |pairs: &mut [(Pair, f64)],
+                 kind: usize,
+                 y: &mut [[DVec3; 4]; L],
+                 at: &[usize; L],
+                 n: usize| {
+        // Unused lanes repeat the first pair.
+        for q in n..L {
+            y[q] = y[0];
+        }
+        let d = if kind == 0 {
+            distance::point_triangle(y)
+        } else {
+            distance::edge_edge(y)
+        };
+        for q in 0..n {
+            pairs[at[q]].1 = d[q];
+        }
+    };
+    for k in 0..pairs.len() {
+        let pair = pairs[k].0;
+        let kind = matches!(pair, Pair::EdgeEdge(..)) as usize;
+        let n = held[kind];
+        y[kind][n] = pair.ids().map(|i| p0[i as usize]);
+        at[kind][n] = k;
+        held[kind] = n + 1;
+        if n + 1 == L {
+            flush(pairs, kind, &mut y[kind], &at[kind], L);
+            held[kind] = 0;
+        }
+    }
+    for kind in 0..2 {
+        if held[kind] > 0 {
+            flush(pairs, kind, &mut y[kind], &at[kind], held[kind]);
+        }
+    }
+}
+
+/// How much closer than its distance a pair's parts can come over the pass, from each
+/// particle's squared path `step2` (see [`Ctx::reach`]).
+fn reach(step2: &[f64], pair: Pair) -> f64 {
+    let ids = pair.ids();
+    let travel = |k: usize| step2[ids[k] as usize];
+    let (a, b) = match pair {
+        Pair::PointTriangle(..) => (travel(0), travel(1).max(travel(2)).max(travel(3))),
+        Pair::EdgeEdge(..) => (travel(0).max(travel(1)), travel(2).max(travel(3))),
+    };
+    a.sqrt() + b.sqrt()
+}
+
 /// Kinetic energy of the free particles among `verts`.
 fn kinetic(verts: &[u32], w: &[f64], vel: &[DVec3]) -> f64 {
     verts
@@ -857,23 +922,35 @@ impl Ctx<'_> {
         // and those motions bring the pair's parts closer by at most the largest difference
         // of their vertices' velocities (relative to the mean) times the search's horizon.
         let slack = 2.0 * 3f64.sqrt() * grow;
-        let mut pairs = std::mem::take(&mut s.pairs);
-        pairs.retain(|&(pair, d0)| {
-            let ids = pair.ids();
-            let w = ids.map(|i| s.tube[i as usize].1);
-            let apart = |a: &[DVec3], b: &[DVec3]| {
-                a.iter()
-                    .flat_map(|p| b.iter().map(move |q| p.distance_squared(*q)))
-                    .fold(0.0, f64::max)
-            };
-            let drift = match pair {
-                Pair::PointTriangle(..) => apart(&w[..1], &w[1..]),
-                Pair::EdgeEdge(..) => apart(&w[..2], &w[2..]),
+        // Marked on the team (a pair to drop gets a NaN distance: a NaN distance would fail
+        // the test as well), then dropped in order.
+        let (tube, tube_len, thick) = (&s.tube, s.tube_len, self.thick);
+        let step2 = &s.step2;
+        let out = SharedMut(s.pairs.as_mut_ptr());
+        for_each_range(s.pairs.len(), PAIR_CHUNK, |r| {
+            // SAFETY: each range is its own chunk's.
+            for (pair, d0) in unsafe { out.slice(r) } {
+                let ids = pair.ids();
+                let w = ids.map(|i| tube[i as usize].1);
+                let apart = |a: &[DVec3], b: &[DVec3]| {
+                    a.iter()
+                        .flat_map(|p| b.iter().map(move |q| p.distance_squared(*q)))
+                        .fold(0.0, f64::max)
+                };
+                let drift = match pair {
+                    Pair::PointTriangle(..) => apart(&w[..1], &w[1..]),
+                    Pair::EdgeEdge(..) => apart(&w[..2], &w[2..]),
+                }
+                .sqrt()
+                    * tube_len;
+                let keep = *d0 - reach(step2, *pair) - drift - slack < PROXIMITY * thick;
+                if !keep {
+                    *d0 = f64::NAN;
+                }
             }
-            .sqrt()
-                * s.tube_len;
-            d0 - self.reach(s, pair, ids) - drift - slack < PROXIMITY * self.thick
         });
+        let mut pairs = std::mem::take(&mut s.pairs);
+        pairs.retain(|&(_, d0)| !d0.is_nan());
         s.pairs = pairs;
         s.broad_valid = true;
         s.broad_at = s.edits;
@@ -951,70 +1028,23 @@ impl Ctx<'_> {
 
     /// The distance at the start of the pass (fixed for the pass: the start does not move) of
     /// each candidate pair from index `from` on.
-    ///
-    /// Four pairs of a kind at a time ([`distance`]): point–triangle and edge–edge pairs are
-    /// set aside into their own batch as they come, and a batch's distances written back
-    /// when it is full (the last ones, part full, at the end).
+    /// On the team, in chunks of [`PAIR_CHUNK`] (see the free function [`start_distances`]).
     fn start_distances(&self, s: &mut Scratch, from: usize) {
-        const L: usize = distance::LANES;
-        // Per kind (point–triangle, edge–edge): the batch's positions, its pairs' indices,
-        // and how many it holds.
-        let mut y = [[[DVec3::ZERO; 4]; L]; 2];
-        let mut at = [[0usize; L]; 2];
-        let mut held = [0usize; 2];
-        let flush = |pairs: &mut [(Pair, f64)],
-                     kind: usize,
-                     y: &mut [[DVec3; 4]; L],
-                     at: &[usize; L],
-                     n: usize| {
-            // Unused lanes repeat the first pair.
-            for q in n..L {
-                y[q] = y[0];
-            }
-            let d = if kind == 0 {
-                distance::point_triangle(y)
-            } else {
-                distance::edge_edge(y)
-            };
-            for q in 0..n {
-                pairs[at[q]].1 = d[q];
-            }
-        };
-        for k in from..s.pairs.len() {
-            let pair = s.pairs[k].0;
-            let kind = matches!(pair, Pair::EdgeEdge(..)) as usize;
-            let n = held[kind];
-            y[kind][n] = pair.ids().map(|i| s.p0[i as usize]);
-            at[kind][n] = k;
-            held[kind] = n + 1;
-            if n + 1 == L {
-                flush(&mut s.pairs, kind, &mut y[kind], &at[kind], L);
-                held[kind] = 0;
-            }
-        }
-        for kind in 0..2 {
-            if held[kind] > 0 {
-                flush(&mut s.pairs, kind, &mut y[kind], &at[kind], held[kind]);
-            }
-        }
+        let p0 = &s.p0;
+        let pairs = &mut s.pairs[from..];
+        let n = pairs.len();
+        let out = SharedMut(pairs.as_mut_ptr());
+        for_each_range(n, PAIR_CHUNK, |r| {
+            // SAFETY: each range is its own chunk's.
+            start_distances(unsafe { out.slice(r) }, p0);
+        });
     }
 
     /// How much closer than `d0` the pair's parts can come over the step: the largest travel
     /// of a point of the first part plus that of the second (a bound: the closest points move
     /// no more than the fastest vertex of their part).
-    fn reach(&self, s: &Scratch, pair: Pair, ids: [u32; 4]) -> f64 {
-        let travel = |i: u32| s.step2[i as usize];
-        let (a, b) = match pair {
-            Pair::PointTriangle(..) => (
-                travel(ids[0]),
-                travel(ids[1]).max(travel(ids[2])).max(travel(ids[3])),
-            ),
-            Pair::EdgeEdge(..) => (
-                travel(ids[0]).max(travel(ids[1])),
-                travel(ids[2]).max(travel(ids[3])),
-            ),
-        };
-        a.sqrt() + b.sqrt()
+    fn reach(&self, s: &Scratch, pair: Pair) -> f64 {
+        reach(&s.step2, pair)
     }
 
     /// The pair's closest points at positions `y` (the pair's four points): the stencil
@@ -1133,7 +1163,7 @@ impl Ctx<'_> {
 
     fn end_separation(&self, s: &mut Scratch, pair: Pair, d0: f64) -> bool {
         let ids = pair.ids();
-        if d0 - self.reach(s, pair, ids) >= self.thick {
+        if d0 - self.reach(s, pair) >= self.thick {
             return false;
         }
         let y = Self::positions(ids, |i| s.p0[i] + s.u[i] * self.h);
@@ -1159,7 +1189,7 @@ impl Ctx<'_> {
     fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
         let ids = pair.ids();
         let tol = touch_tolerance(self.thick);
-        if d0 - self.reach(s, pair, ids) > tol {
+        if d0 - self.reach(s, pair) > tol {
             return None;
         }
         let x0 = Self::positions(ids, |i| s.p0[i]);

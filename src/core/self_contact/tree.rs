@@ -57,6 +57,7 @@
 //! feature pair comes from exactly one triangle pair and is found once.
 
 use super::ContactSurface;
+use crate::core::kernels::{SharedMut, for_each_range};
 use glam::{DVec3, Mat4, Vec3A, Vec4};
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -275,11 +276,45 @@ fn span_lanes(span: &[Span]) -> impl Iterator<Item = [Vec4; 6]> + '_ {
     })
 }
 
-/// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, four at a
-/// time, and its normals at the start and the end (`normals[t]`, as
-/// [`SurfaceTree::normals_of`] computes them).
+/// Triangles a chunk of [`all_bits`] holds on the team (a multiple of four: the batches'
+/// lanes; about ten microseconds of work).
+const BITS_CHUNK: usize = 1024;
+
+/// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, and its
+/// normals at the start and the end (`normals[t]`, as [`SurfaceTree::normals_of`] computes
+/// them): [`bits_of_range`] in chunks of [`BITS_CHUNK`] triangles on the team (each
+/// triangle's bits are its own, so the same bits on any number of threads).
 #[allow(clippy::too_many_arguments)]
 fn all_bits(
+    triangles: &[[u32; 3]],
+    q0: &[Vec3A],
+    q1: &[Vec3A],
+    qmax: f32,
+    span: &[Span],
+    span4: &[[Vec4; 6]],
+    out: &mut [u32],
+    normals: &mut [[Vec3A; 2]],
+) {
+    let n = triangles.len();
+    let (out, normals) = (SharedMut(out.as_mut_ptr()), SharedMut(normals.as_mut_ptr()));
+    for_each_range(n, BITS_CHUNK, |r| {
+        bits_of_range(
+            &triangles[r.clone()],
+            q0,
+            q1,
+            qmax,
+            &span[r.clone()],
+            &span4[r.start / 4..r.end / 4],
+            // SAFETY: each range is its own chunk's.
+            unsafe { out.slice(r.clone()) },
+            unsafe { normals.slice(r) },
+        )
+    });
+}
+
+/// [`all_bits`] of a run of triangles (`span4` the batches of `span`), four at a time.
+#[allow(clippy::too_many_arguments)]
+fn bits_of_range(
     triangles: &[[u32; 3]],
     q0: &[Vec3A],
     q1: &[Vec3A],
