@@ -99,3 +99,15 @@ impl VectorExt for Vector {
         [self.x as f64, self.y as f64, self.z as f64]
     }
 }
+
+/// The unit tests' random numbers: Marsaglia's xorshift64 (*Xorshift RNGs*, 2003) from
+/// `seed`, each call a uniform number in [−1, 1) with 53 random bits.
+#[cfg(test)]
+pub(crate) fn test_rng(mut seed: u64) -> impl FnMut() -> f64 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}

@@ -833,13 +833,8 @@ mod tests {
     /// those far away (so the response loops skip them).
     #[test]
     fn a_particle_called_clear_has_no_contact() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as Scalar
-        };
+        let mut rng = crate::math::test_rng(0x2545_f491_4f6c_dd1du64);
+        let mut rnd = move || rng() as Scalar;
         let material = ContactMaterial {
             thickness: 0.02,
             ..Default::default()

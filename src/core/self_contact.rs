@@ -1651,13 +1651,7 @@ mod tests {
 
     #[test]
     fn closest_points_against_brute_force() {
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = crate::math::test_rng(12345u64);
         for _ in 0..200 {
             let v = [0; 5].map(|_| DVec3::new(rnd(), rnd(), rnd()));
             let b = closest_on_triangle(v[0], v[1], v[2], v[3]);

@@ -161,13 +161,7 @@ mod tests {
     /// and every count from 0 to 13 (the four-wide groups and the tail).
     #[test]
     fn sweep_matches_the_reference_bit_for_bit() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = crate::math::test_rng(0x9e37_79b9_7f4a_7c15u64);
         for n in 0..14 {
             let mut vecs = |s: f64| -> Vec<Vector> {
                 (0..n)

@@ -731,13 +731,8 @@ mod tests {
         if !std::arch::is_x86_feature_detected!("avx") {
             return;
         }
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            ((seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as Scalar
-        };
+        let mut rng = crate::math::test_rng(0x9e37_79b9_7f4a_7c15u64);
+        let mut rnd = move || rng() as Scalar;
         let n = 40;
         let x: Vec<Vector> = (0..n)
             .map(|_| Vector::new(rnd(), rnd(), rnd()) * 0.1 + Vector::new(3.0, -2.0, 1.0))

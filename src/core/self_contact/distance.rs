@@ -270,13 +270,7 @@ mod tests {
     /// Random pairs, with the degenerate ones the cases meet: parallel and collinear edges,
     /// edges and triangles of no extent, points on the plane, in the triangle, on an edge.
     fn pairs() -> Vec<[DVec3; 4]> {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut rnd = crate::math::test_rng(0x9e37_79b9_7f4a_7c15u64);
         let mut out = vec![];
         for k in 0..4000 {
             let mut y = [0; 4].map(|_| DVec3::new(rnd(), rnd(), rnd()));
