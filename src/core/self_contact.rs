@@ -1027,8 +1027,8 @@ impl Ctx<'_> {
     }
 
     /// The distance at the start of the pass (fixed for the pass: the start does not move) of
-    /// each candidate pair from index `from` on.
-    /// On the team, in chunks of [`PAIR_CHUNK`] (see the free function [`start_distances`]).
+    /// each candidate pair from index `from` on: on the team, in chunks of [`PAIR_CHUNK`]
+    /// (see the free function [`start_distances`]).
     fn start_distances(&self, s: &mut Scratch, from: usize) {
         let p0 = &s.p0;
         let pairs = &mut s.pairs[from..];
