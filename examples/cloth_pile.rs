@@ -7,6 +7,7 @@
 //! cargo run --release --example cloth_pile -- --bench     # headless: cost of a step, table
 //! cargo run --release --example cloth_pile -- --bodies    # the pile as three bodies only
 //! cargo run --release --example cloth_pile -- --bench --only 64   # the 64² rows only (or 32)
+//! cargo run --release --example cloth_pile -- --bench --threads 2 # kernels on 2 threads (default 1)
 //! cargo run --release --example cloth_pile -- --detail 3  # drawn 3× finer (SurfaceDetail)
 //! ```
 //!
@@ -43,7 +44,14 @@ fn main() {
             .position(|a| a == "--only")
             .and_then(|k| argv.get(k + 1))
             .and_then(|n| n.parse().ok());
-        bench(argv.iter().any(|a| a == "--quick"), only);
+        // One thread unless asked: self-collision's share of a step is stated for one.
+        let threads = argv
+            .iter()
+            .position(|a| a == "--threads")
+            .and_then(|k| argv.get(k + 1))
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(1);
+        bench(argv.iter().any(|a| a == "--quick"), only, threads);
         return;
     }
     let args = common::args("cloth_pile");
@@ -87,11 +95,12 @@ fn surface(scene: &Scene) -> SoftBodySurface {
 
 /// Runs the pile headless and prints the cost of a step with and without self-collision,
 /// with the broad/narrow split.
-/// The table; `only`: just the rows of that resolution (64 or 32).
-fn bench(quick: bool, only: Option<usize>) {
+/// The table; `only`: just the rows of that resolution (64 or 32); the bodies' kernels,
+/// self-contact and colliders on `threads` threads (`core::kernels::with_threads`).
+fn bench(quick: bool, only: Option<usize>, threads: usize) {
     let frames = if quick { 60 } else { 180 };
     println!(
-        "cloth pile, symplectic Euler at `ClothPileParams::stable_step` (1/1200 s for 32², 1/3500 s for 64²), {frames} frames ({:.1} s), {}, one thread",
+        "cloth pile, symplectic Euler at `ClothPileParams::stable_step` (1/1200 s for 32², 1/3500 s for 64²), {frames} frames ({:.1} s), {}, {threads} thread(s)",
         frames as f64 / 60.0,
         PRECISION
     );
@@ -122,14 +131,16 @@ fn bench(quick: bool, only: Option<usize>) {
                 ..Default::default()
             };
             let mut sim = Simulation::new(model, state, config);
-            let mut steps = 0u64;
-            let mut wall = Duration::ZERO;
-            for _ in 0..frames {
-                let t = Instant::now();
-                let rep = sim.advance_frame().expect("stable");
-                wall += t.elapsed();
-                steps += rep.substeps as u64;
-            }
+            let (wall, steps) = bevy_soft_body::core::kernels::with_threads(threads, || {
+                let (mut wall, mut steps) = (Duration::ZERO, 0u64);
+                for _ in 0..frames {
+                    let t = Instant::now();
+                    let rep = sim.advance_frame().expect("stable");
+                    wall += t.elapsed();
+                    steps += rep.substeps as u64;
+                }
+                (wall, steps)
+            });
             let r = sim
                 .system
                 .self_contact

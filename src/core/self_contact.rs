@@ -1528,11 +1528,31 @@ pub fn cubic_roots_in_unit(c3: f64, c2: f64, c1: f64, c0: f64, mut f: impl FnMut
 }
 
 /// Barycentric weights of the point of triangle `abc` closest to `p` (Ericson, *Real-Time
-/// Collision Detection*, §5.1.5).
+/// Collision Detection*, §5.1.5). A triangle whose corners lie on a line (to within
+/// `sin² θ ≤ 10⁻¹⁴` between its sides, where the regions' tests lose their meaning) is the
+/// union of its edges: the nearest of their closest points.
 pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
     let ab = b - a;
     let ac = c - a;
     let ap = p - a;
+    if ab.cross(ac).length_squared() <= 1e-14 * ab.length_squared() * ac.length_squared() {
+        // On edge `u v` at parameter `t`: the weights of `u` and `v` (their corners' indices).
+        let on_edge = |u: DVec3, v: DVec3| {
+            let d = v - u;
+            let t = ((p - u).dot(d) / d.length_squared().max(f64::MIN_POSITIVE)).clamp(0.0, 1.0);
+            (p.distance_squared(u + d * t), t)
+        };
+        let (ab_d, ab_t) = on_edge(a, b);
+        let (ac_d, ac_t) = on_edge(a, c);
+        let (bc_d, bc_t) = on_edge(b, c);
+        return if ab_d <= ac_d && ab_d <= bc_d {
+            [1.0 - ab_t, ab_t, 0.0]
+        } else if ac_d <= bc_d {
+            [1.0 - ac_t, 0.0, ac_t]
+        } else {
+            [0.0, 1.0 - bc_t, bc_t]
+        };
+    }
     let d1 = ab.dot(ap);
     let d2 = ac.dot(ap);
     if d1 <= 0.0 && d2 <= 0.0 {

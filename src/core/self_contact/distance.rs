@@ -323,18 +323,8 @@ mod tests {
         let ee = batches(&ys, edge_edge);
         for (k, y) in ys.iter().enumerate() {
             let scale = y.iter().map(|v| v.length()).fold(1.0, f64::max);
-            // Ericson's regions, and the edges: a degenerate triangle (its corners on a line)
-            // is the longest of them, where `closest_on_triangle` takes its nearest corner.
             let b = closest_on_triangle(y[0], y[1], y[2], y[3]);
-            let to_edge = |a: DVec3, c: DVec3| {
-                let (_, t) = closest_between_segments(y[0], y[0], a, c);
-                y[0].distance(a.lerp(c, t))
-            };
-            let want = y[0]
-                .distance(y[1] * b[0] + y[2] * b[1] + y[3] * b[2])
-                .min(to_edge(y[1], y[2]))
-                .min(to_edge(y[1], y[3]))
-                .min(to_edge(y[2], y[3]));
+            let want = y[0].distance(y[1] * b[0] + y[2] * b[1] + y[3] * b[2]);
             assert!(
                 (pt[k] - want).abs() <= 1e-12 * scale,
                 "point–triangle {k}: {} against {want} ({y:?})",
