@@ -759,7 +759,7 @@ const PAIR_CHUNK: usize = 1024;
 /// they come, and a batch's distances written back when it is full (the last ones, part full,
 /// at the end). Each lane's distance is its own pair's alone, so the bits do not depend on
 /// how the pairs are cut into chunks or batched.
-fn start_distances(pairs: &mut [(Pair, f64)], p0: &[DVec3]) {
+fn distances_in_batches(pairs: &mut [(Pair, f64)], p0: &[DVec3]) {
     const L: usize = distance::LANES;
     // Per kind (point–triangle, edge–edge): the batch's positions, its pairs' indices, and
     // how many it holds.
@@ -803,8 +803,10 @@ fn start_distances(pairs: &mut [(Pair, f64)], p0: &[DVec3]) {
     }
 }
 
-/// How much closer than its distance a pair's parts can come over the pass, from each
-/// particle's squared path `step2` (see [`Ctx::reach`]).
+/// How much closer than its distance a pair's parts can come over the pass: the largest
+/// travel of a point of the first part plus that of the second (a bound: the closest points
+/// move no more than the fastest vertex of their part), from each particle's squared path
+/// over the pass, `step2`.
 fn reach(step2: &[f64], pair: Pair) -> f64 {
     let ids = pair.ids();
     let travel = |k: usize| step2[ids[k] as usize];
@@ -1028,7 +1030,7 @@ impl Ctx<'_> {
 
     /// The distance at the start of the pass (fixed for the pass: the start does not move) of
     /// each candidate pair from index `from` on: on the team, in chunks of [`PAIR_CHUNK`]
-    /// (see the free function [`start_distances`]).
+    /// (see [`distances_in_batches`]).
     fn start_distances(&self, s: &mut Scratch, from: usize) {
         let p0 = &s.p0;
         let pairs = &mut s.pairs[from..];
@@ -1036,15 +1038,8 @@ impl Ctx<'_> {
         let out = SharedMut(pairs.as_mut_ptr());
         for_each_range(n, PAIR_CHUNK, |r| {
             // SAFETY: each range is its own chunk's.
-            start_distances(unsafe { out.slice(r) }, p0);
+            distances_in_batches(unsafe { out.slice(r) }, p0);
         });
-    }
-
-    /// How much closer than `d0` the pair's parts can come over the step: the largest travel
-    /// of a point of the first part plus that of the second (a bound: the closest points move
-    /// no more than the fastest vertex of their part).
-    fn reach(&self, s: &Scratch, pair: Pair) -> f64 {
-        reach(&s.step2, pair)
     }
 
     /// The pair's closest points at positions `y` (the pair's four points): the stencil
@@ -1163,7 +1158,7 @@ impl Ctx<'_> {
 
     fn end_separation(&self, s: &mut Scratch, pair: Pair, d0: f64) -> bool {
         let ids = pair.ids();
-        if d0 - self.reach(s, pair) >= self.thick {
+        if d0 - reach(&s.step2, pair) >= self.thick {
             return false;
         }
         let y = Self::positions(ids, |i| s.p0[i] + s.u[i] * self.h);
@@ -1189,7 +1184,7 @@ impl Ctx<'_> {
     fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
         let ids = pair.ids();
         let tol = touch_tolerance(self.thick);
-        if d0 - self.reach(s, pair) > tol {
+        if d0 - reach(&s.step2, pair) > tol {
             return None;
         }
         let x0 = Self::positions(ids, |i| s.p0[i]);

@@ -282,7 +282,7 @@ const BITS_CHUNK: usize = 1024;
 
 /// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, and its
 /// normals at the start and the end (`normals[t]`, as [`SurfaceTree::normals_of`] computes
-/// them): [`bits_of_range`] in chunks of [`BITS_CHUNK`] triangles on the team (each
+/// them): four at a time, in chunks of [`BITS_CHUNK`] triangles on the team (each
 /// triangle's bits are its own, so the same bits on any number of threads).
 #[allow(clippy::too_many_arguments)]
 fn all_bits(
@@ -295,75 +295,57 @@ fn all_bits(
     out: &mut [u32],
     normals: &mut [[Vec3A; 2]],
 ) {
-    let n = triangles.len();
     let (out, normals) = (SharedMut(out.as_mut_ptr()), SharedMut(normals.as_mut_ptr()));
-    for_each_range(n, BITS_CHUNK, |r| {
-        bits_of_range(
+    for_each_range(triangles.len(), BITS_CHUNK, |r| {
+        // The chunk's own (`span4` holds batches of four, and a chunk starts on one).
+        let (triangles, span, span4) = (
             &triangles[r.clone()],
-            q0,
-            q1,
-            qmax,
             &span[r.clone()],
             &span4[r.start / 4..r.end / 4],
-            // SAFETY: each range is its own chunk's.
-            unsafe { out.slice(r.clone()) },
-            unsafe { normals.slice(r) },
-        )
-    });
-}
-
-/// [`all_bits`] of a run of triangles (`span4` the batches of `span`), four at a time.
-#[allow(clippy::too_many_arguments)]
-fn bits_of_range(
-    triangles: &[[u32; 3]],
-    q0: &[Vec3A],
-    q1: &[Vec3A],
-    qmax: f32,
-    span: &[Span],
-    span4: &[[Vec4; 6]],
-    out: &mut [u32],
-    normals: &mut [[Vec3A; 2]],
-) {
-    let batches = triangles.len() / 4;
-    for c in 0..batches {
-        let ts = &triangles[4 * c..4 * c + 4];
-        // Each lane's four edges, transposed into components (a 4 × 4 transpose).
-        let edges = ts.iter().map(|t| {
-            let [a, b, cc] = t.map(|i| i as usize);
-            [q0[b] - q0[a], q0[cc] - q0[a], q1[b] - q1[a], q1[cc] - q1[a]]
-        });
-        let mut cols = [[Vec4::ZERO; 4]; 4];
-        for (l, e) in edges.enumerate() {
-            for k in 0..4 {
-                cols[k][l] = e[k].extend(0.0);
+        );
+        // SAFETY: each range is its own chunk's.
+        let (out, normals) = unsafe { (out.slice(r.clone()), normals.slice(r)) };
+        let batches = triangles.len() / 4;
+        for c in 0..batches {
+            let ts = &triangles[4 * c..4 * c + 4];
+            // Each lane's four edges, transposed into components (a 4 × 4 transpose).
+            let edges = ts.iter().map(|t| {
+                let [a, b, cc] = t.map(|i| i as usize);
+                [q0[b] - q0[a], q0[cc] - q0[a], q1[b] - q1[a], q1[cc] - q1[a]]
+            });
+            let mut cols = [[Vec4::ZERO; 4]; 4];
+            for (l, e) in edges.enumerate() {
+                for k in 0..4 {
+                    cols[k][l] = e[k].extend(0.0);
+                }
+            }
+            let lanes = |c: &[Vec4; 4]| {
+                let m = Mat4::from_cols(c[0], c[1], c[2], c[3]).transpose();
+                [m.x_axis, m.y_axis, m.z_axis]
+            };
+            let e = [
+                lanes(&cols[0]),
+                lanes(&cols[1]),
+                lanes(&cols[2]),
+                lanes(&cols[3]),
+            ];
+            let [lo_x, lo_y, lo_z, hi_x, hi_y, hi_z] = span4[c];
+            let (bits, [n0, n1]) = triangle_bits4(e, [lo_x, lo_y, lo_z], [hi_x, hi_y, hi_z], qmax);
+            out[4 * c..4 * c + 4].copy_from_slice(&bits);
+            // The normals back from lanes to one vector per triangle.
+            let per_lane = |n: Lanes3| Mat4::from_cols(n[0], n[1], n[2], Vec4::ZERO).transpose();
+            let (m0, m1) = (per_lane(n0), per_lane(n1));
+            for l in 0..4 {
+                normals[4 * c + l] = [Vec3A::from_vec4(m0.col(l)), Vec3A::from_vec4(m1.col(l))];
             }
         }
-        let lanes = |c: &[Vec4; 4]| {
-            let m = Mat4::from_cols(c[0], c[1], c[2], c[3]).transpose();
-            [m.x_axis, m.y_axis, m.z_axis]
-        };
-        let e = [
-            lanes(&cols[0]),
-            lanes(&cols[1]),
-            lanes(&cols[2]),
-            lanes(&cols[3]),
-        ];
-        let [lo_x, lo_y, lo_z, hi_x, hi_y, hi_z] = span4[c];
-        let (bits, [n0, n1]) = triangle_bits4(e, [lo_x, lo_y, lo_z], [hi_x, hi_y, hi_z], qmax);
-        out[4 * c..4 * c + 4].copy_from_slice(&bits);
-        // The normals back from lanes to one vector per triangle.
-        let per_lane = |n: Lanes3| Mat4::from_cols(n[0], n[1], n[2], Vec4::ZERO).transpose();
-        let (m0, m1) = (per_lane(n0), per_lane(n1));
-        for l in 0..4 {
-            normals[4 * c + l] = [Vec3A::from_vec4(m0.col(l)), Vec3A::from_vec4(m1.col(l))];
+        for t in 4 * batches..triangles.len() {
+            let [a, b, c] = triangles[t].map(|i| i as usize);
+            out[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
+            let n = |q: &[Vec3A]| (q[b] - q[a]).cross(q[c] - q[a]);
+            normals[t] = [n(q0), n(q1)];
         }
-    }
-    for t in 4 * batches..triangles.len() {
-        let [a, b, c] = triangles[t].map(|i| i as usize);
-        out[t] = triangle_bits([q0[a], q0[b], q0[c]], [q1[a], q1[b], q1[c]], qmax, span[t]);
-        let n = |q: &[Vec3A]| (q[b] - q[a]).cross(q[c] - q[a]);
-        normals[t] = [n(q0), n(q1)];
-    }
+    });
 }
 
 /// What a search finds: a vertex and a triangle, or two edges (by index).
