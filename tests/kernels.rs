@@ -514,7 +514,7 @@ fn box_scene() -> bevy_soft_body::core::scene::Scene {
 /// kernel's (springs or tets alone) on the PhysBAM wire (strain springs, dampers, a prescribed
 /// rotating end), a cloth with wind, drag, an external force and pins, a 48² cloth cut into
 /// three chunks with a free particle after it that no spring reaches (the pass's tail past
-/// the kernel's particles), and the tet box; in separate passes on the cloth and the box in
+/// the kernel's particles), and the tet box, alone and with such a particle; in separate passes on the cloth and the box in
 /// one model (two kernels).
 #[test]
 fn fused_symplectic_euler_is_derivative_then_kick_drift() {
@@ -536,12 +536,20 @@ fn fused_symplectic_euler_is_derivative_then_kick_drift() {
         mass: 0.01,
         pinned: false,
     });
+    let mut boxed = box_scene();
+    boxed.particles.push(ParticleDesc {
+        position: [0.3, 0.2, 1.0],
+        velocity: [0.5, 0.0, 0.0],
+        mass: 0.01,
+        pinned: false,
+    });
     let both = box_scene().append(cloth.clone());
     let scenes = [
         build::wire(11, 0.05, 100).unwrap(),
         cloth,
         large,
         box_scene(),
+        boxed,
         both,
     ];
     for (scene, threads) in scenes.into_iter().flat_map(|s| [(s.clone(), 2), (s, 3)]) {

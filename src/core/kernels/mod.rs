@@ -303,8 +303,11 @@ pub(crate) trait Gather: Sync {
     type Slot: Sync;
     /// One more than the largest particle index an element refers to.
     fn bound(&self) -> usize;
-    /// Particles per chunk of both passes.
-    fn chunk(&self) -> usize;
+    /// Number of chunks of both passes (at least one when the bound is not zero).
+    fn chunks(&self) -> usize;
+    /// Chunk `c`'s particles, for `c <` [`Self::chunks`]: consecutive ranges from 0 to the
+    /// bound.
+    fn range(&self, c: usize) -> std::ops::Range<usize>;
     /// For each chunk, its particles that other chunks' elements read.
     fn border(&self) -> &ChunkLists;
     /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
@@ -330,10 +333,31 @@ pub(crate) trait Gather: Sync {
 pub(crate) unsafe fn gather_add<K: Gather>(kernel: &K, buf: &[K::Slot], f: &mut [Vector]) {
     assert!(f.len() >= kernel.bound(), "forces past the array");
     let fp = SharedMut(f.as_mut_ptr());
-    for_each_range(kernel.bound(), kernel.chunk(), |r| {
+    for_each_chunk(kernel.chunks(), |c| {
+        let r = kernel.range(c);
         // SAFETY: particles below the bound; each chunk writes its own particles only.
         unsafe { kernel.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
     });
+}
+
+/// The chunks of a pass over `n` particles that follows a kernel's chunks: the kernel's, then
+/// the particles past its bound in chunks of [`springs::CHUNK_PARTICLES`] (particles no element
+/// refers to, swept alone). Returns their number and chunk `c`'s range.
+fn chunks_over<K: Gather>(
+    kernel: &K,
+    n: usize,
+) -> (usize, impl Fn(usize) -> std::ops::Range<usize>) {
+    let (own, bound) = (kernel.chunks(), kernel.bound().min(n));
+    let tail = springs::CHUNK_PARTICLES;
+    let range = move |c: usize| {
+        if c < own {
+            kernel.range(c)
+        } else {
+            let p0 = bound + (c - own) * tail;
+            p0..(p0 + tail).min(n)
+        }
+    };
+    (own + (n - bound).div_ceil(tail), range)
 }
 
 /// Sets `f` to every particle's gathered force (zero past the kernel's particles), then runs
@@ -369,13 +393,16 @@ pub(crate) unsafe fn gather_set_then<K: Gather>(
         x.len() == n && v.len() == n,
         "state and force arrays differ in length"
     );
-    let (bound, chunk) = (kernel.bound(), kernel.chunk());
+    let bound = kernel.bound();
+    assert!(n >= bound, "forces past the array");
+    let (chunks, range) = chunks_over(kernel, n);
     let (xp, vp, fp) = (
         SharedMut(x.as_mut_ptr()),
         SharedMut(v.as_mut_ptr()),
         SharedMut(f.as_mut_ptr()),
     );
-    for_each_range(n, chunk, |r| {
+    for_each_chunk(chunks, |c| {
+        let r = range(c);
         // SAFETY: the ranges are disjoint and below `n`, the length of the three slices, which
         // this function borrows exclusively; each chunk's job alone touches its range.
         let (x, v, f) = unsafe {
@@ -385,12 +412,14 @@ pub(crate) unsafe fn gather_set_then<K: Gather>(
                 fp.slice(r.clone()),
             )
         };
-        let mine = kernel.border().of(r.start / chunk);
+        let mine = kernel.border().of(c);
         claim_lines(x, mine, r.start);
         claim_lines(v, mine, r.start);
         let end = r.end.min(bound).max(r.start);
-        // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+        if end > r.start {
+            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+            unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+        }
         f[end - r.start..].fill(Vector::ZERO);
         finish(Chunk { range: r, x, v, f });
     });

@@ -630,8 +630,12 @@ impl super::Gather for SpringRows {
         SpringRows::bound(self)
     }
 
-    fn chunk(&self) -> usize {
-        self.chunk
+    fn chunks(&self) -> usize {
+        SpringRows::chunks(self)
+    }
+
+    fn range(&self, c: usize) -> std::ops::Range<usize> {
+        c * self.chunk..((c + 1) * self.chunk).min(self.bound())
     }
 
     fn border(&self) -> &ChunkLists {
@@ -795,8 +799,12 @@ impl super::Gather for WithBands<'_> {
         self.rows.bound()
     }
 
-    fn chunk(&self) -> usize {
-        self.rows.chunk
+    fn chunks(&self) -> usize {
+        self.rows.chunks()
+    }
+
+    fn range(&self, c: usize) -> std::ops::Range<usize> {
+        <SpringRows as super::Gather>::range(self.rows, c)
     }
 
     fn border(&self) -> &ChunkLists {

@@ -7,10 +7,11 @@
 //! material's `C`, `D`. `F = Σₐ (xₐ − x₀) gₐᵀ` uses edge vectors, which keeps f32 accurate far
 //! from the origin. Forces go first to a per-element buffer, then each particle sums its
 //! elements' forces in a fixed order (the elements' as given). Both passes are cut into the
-//! same chunks of at most [`CHUNK_PARTICLES`] particles, an element going with the chunk of
-//! its lowest vertex: no two threads write the same memory, the order of every sum is
-//! independent of the thread count, and a thread gathers the slots its own element pass
-//! wrote.
+//! same chunks of consecutive particles, of about [`CHUNK_PARTICLES`] each and as nearly the
+//! same work as the particles allow (see `borders`), an element going with the chunk of
+//! its lowest vertex (but at the chunks' edges): no two threads write the same memory, the
+//! order of every sum is independent of the thread count, and a thread gathers mostly the
+//! slots its own element pass wrote.
 //!
 //! Where the processor has AVX, the element pass takes eight elements at a time (four in the
 //! f64 build) from a copy of their data laid out by lanes (`Lanes`): the same operations as
@@ -26,10 +27,71 @@ use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
 use std::sync::Mutex;
 
-/// Elements per chunk of the element pass.
-/// Most particles per chunk, the unit of parallel work of both passes (a tet mesh has about
-/// four elements a particle: 5 to 6 µs of work on one core, elements, gather and sweep).
+/// Particles per chunk on average, the unit of parallel work of both passes (a tet mesh has
+/// about four elements a particle: 5 to 6 µs of work on one core, elements, gather and sweep).
 pub const CHUNK_PARTICLES: usize = 128;
+
+/// Elements a chunk's element range is rounded to (the lanes' width in f32, twice it in f64).
+const ELEMENT_GROUP: usize = 8;
+
+/// The costs of a chunk's work in tenths of a nanosecond, as `perf` shares them out on one
+/// thread of the project's machine (the 5000-tet bench box in f32, 56 µs a step: the element
+/// lanes 64 %, 7.4 ns an element; the gather 19 %, 0.54 ns a slot; the sweep 4 %, 1.8 ns a
+/// particle; see [`borders`]). An element's forces, in lanes.
+const COST_ELEMENT: u64 = 74;
+/// A slot gathered (see [`COST_ELEMENT`]).
+const COST_SLOT: u64 = 5;
+/// A particle's sweep (see [`COST_ELEMENT`]).
+const COST_PARTICLE: u64 = 18;
+
+/// The chunks of both passes over `bound` particles, whose slots start at `start` and whose
+/// elements (by lowest vertex) start at `below`, as borders `0 = b₀ < b₁ < … = bound`.
+///
+/// Their number is as [`super::chunk_size`]'s (at most [`CHUNK_PARTICLES`] particles a chunk
+/// on average), rounded up to a multiple of four beyond two, and each chunk holds as nearly as
+/// the particles allow the same estimated work: [`COST_ELEMENT`] for each element whose lowest
+/// vertex it holds, [`COST_SLOT`] for each slot it gathers, [`COST_PARTICLE`] for each of its
+/// particles. The team gives each thread the same number of chunks, so on two or four threads
+/// each gets the same work. With chunks of the same number of particles, the bench box (11
+/// layers of 121 particles) had one chunk a layer and its top layer no elements (they go with
+/// their lowest vertex): the second of two threads took six layers' gather and sweep against
+/// the first's five, about 2.6 % more work by the costs above. The borders depend on the mesh
+/// alone, never on the thread count.
+fn borders(start: &[u32], below: &[u32]) -> Vec<u32> {
+    let bound = start.len() - 1;
+    if bound == 0 {
+        return vec![0];
+    }
+    let mut count = bound.div_ceil(CHUNK_PARTICLES);
+    if bound >= CHUNK_PARTICLES {
+        count = count.max(2);
+    }
+    if count > 2 {
+        count = count.next_multiple_of(4);
+    }
+    // The work of the particles before `p`.
+    let work = |p: usize| {
+        COST_ELEMENT * below[p] as u64 + COST_SLOT * start[p] as u64 + COST_PARTICLE * p as u64
+    };
+    let total = work(bound);
+    let mut b = vec![0u32];
+    let mut p = 0;
+    for k in 1..count {
+        let target = total * k as u64 / count as u64;
+        while p < bound && work(p + 1) <= target {
+            p += 1;
+        }
+        // `work(p) ≤ target < work(p + 1)`: the nearer of the two.
+        let q = if p < bound && work(p + 1) - target < target - work(p) {
+            p + 1
+        } else {
+            p
+        };
+        b.push(q.clamp(b[k - 1] as usize + 1, bound - (count - k)) as u32);
+    }
+    b.push(bound as u32);
+    b
+}
 
 #[derive(Clone, Copy, Debug)]
 struct Element {
@@ -67,9 +129,10 @@ pub struct TetForces {
     /// Slot `4 t + a`: element `t`'s force on its vertex `a`.
     slots: Vec<u32>,
     buffer: Mutex<Vec<Vector>>,
-    /// Particles per chunk of both passes (see [`super::chunk_size`]).
-    chunk: usize,
-    /// The elements of particle chunk `c`, those whose lowest vertex is in it, are
+    /// Chunk `c` of both passes holds particles `borders[c]..borders[c + 1]` (see
+    /// [`borders`]).
+    borders: Vec<u32>,
+    /// The elements of particle chunk `c`, about those whose lowest vertex is in it, are
     /// `elements[element_start[c]..element_start[c + 1]]`.
     element_start: Vec<u32>,
     /// For each chunk, its particles that elements of other chunks reach.
@@ -104,32 +167,26 @@ impl TetForces {
             .map(|i| i as usize + 1)
             .max()
             .unwrap_or(0);
-        // Elements by the chunk of their lowest vertex (stably), so that a thread's element
-        // pass writes the slots its gather reads, and reads its own particles but at the
-        // chunks' borders.
-        let chunk = super::chunk_size(bound, CHUNK_PARTICLES);
-        let chunk_of = |e: &Element| e.v.iter().min().map_or(0, |&p| p as usize / chunk);
+        let lowest = |e: &Element| e.v.iter().min().map_or(0, |&p| p as usize);
+        // Elements by their lowest vertex (stably), so that a thread's element pass writes mostly
+        // the slots its gather reads, and reads its own particles but at the chunks' borders.
         let mut order: Vec<usize> = (0..given.len()).collect();
-        order.sort_by_key(|&k| chunk_of(&given[k]));
-        let mut element_start = vec![0u32; bound.div_ceil(chunk) + 1];
-        for e in &given {
-            element_start[chunk_of(e) + 1] += 1;
-        }
-        for c in 1..element_start.len() {
-            element_start[c] += element_start[c - 1];
-        }
+        order.sort_by_key(|&k| lowest(&given[k]));
         let mut new_index = vec![0usize; given.len()];
         for (k, &g) in order.iter().enumerate() {
             new_index[g] = k;
         }
         let mut start = vec![0u32; bound + 1];
+        let mut below = vec![0u32; bound + 1];
         for t in &given {
             for &p in &t.v {
                 start[p as usize + 1] += 1;
             }
+            below[lowest(t) + 1] += 1;
         }
         for p in 0..bound {
             start[p + 1] += start[p];
+            below[p + 1] += below[p];
         }
         let mut next = start.clone();
         let mut slots = vec![0u32; 4 * given.len()];
@@ -140,13 +197,35 @@ impl TetForces {
             }
         }
         let elements: Vec<Element> = order.iter().map(|&k| given[k]).collect();
+        let borders = borders(&start, &below);
+        // Chunk `c`'s elements: those whose lowest vertex it holds, the border moved to the
+        // nearest whole group of lanes (so that the lanes take every element but the last
+        // few); which chunk evaluates an element changes no bits.
+        let group = ELEMENT_GROUP;
+        let element_start: Vec<u32> = borders
+            .iter()
+            .map(|&b| {
+                let e = below[b as usize] as usize;
+                let rounded = (e + group / 2) / group * group;
+                (if b as usize == bound {
+                    e
+                } else {
+                    rounded.min(elements.len())
+                }) as u32
+            })
+            .collect();
+        let chunks = borders.len() - 1;
+        let chunk_of = |p: u32| borders.partition_point(|&b| b <= p) - 1;
         let crossing = || {
-            elements
-                .iter()
-                .flat_map(|e| e.v.map(|p| (chunk_of(e), p)))
-                .filter(|&(c, p)| p as usize / chunk != c)
+            (0..chunks).flat_map(|c| {
+                let (e0, e1) = (element_start[c] as usize, element_start[c + 1] as usize);
+                elements[e0..e1]
+                    .iter()
+                    .flat_map(move |e| e.v.map(|p| (c, p)))
+                    .filter(|&(c, p)| chunk_of(p) != c)
+            })
         };
-        let border = ChunkLists::new(crossing().map(|(_, p)| (p as usize / chunk, p)));
+        let border = ChunkLists::new(crossing().map(|(_, p)| (chunk_of(p), p)));
         let reach = ChunkLists::new(crossing());
         #[cfg(target_arch = "x86_64")]
         let lanes = elements
@@ -166,7 +245,7 @@ impl TetForces {
             slots,
             buffer: Mutex::new(vec![Vector::ZERO; 4 * elements.len()]),
             elements,
-            chunk,
+            borders,
             partials: Mutex::new(vec![0.0; element_start.len() - 1]),
             element_start,
             border,
@@ -295,8 +374,12 @@ impl super::Gather for TetForces {
         TetForces::bound(self)
     }
 
-    fn chunk(&self) -> usize {
-        self.chunk
+    fn chunks(&self) -> usize {
+        TetForces::chunks(self)
+    }
+
+    fn range(&self, c: usize) -> std::ops::Range<usize> {
+        self.borders[c] as usize..self.borders[c + 1] as usize
     }
 
     fn border(&self) -> &ChunkLists {
@@ -709,11 +792,116 @@ impl Clone for TetForces {
             start: self.start.clone(),
             slots: self.slots.clone(),
             buffer: Mutex::new(buffer),
-            chunk: self.chunk,
+            borders: self.borders.clone(),
             element_start: self.element_start.clone(),
             border: self.border.clone(),
             reach: self.reach.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
+        }
+    }
+}
+
+#[cfg(test)]
+mod layout_tests {
+    use super::*;
+    use crate::core::fem::mesh::TetMesh;
+    use crate::core::kernels::Gather;
+
+    /// The elements of `mesh` as the kernel takes them (only their vertices matter here).
+    fn elements(mesh: &TetMesh) -> Vec<Element> {
+        mesh.tets
+            .iter()
+            .map(|t| Element {
+                v: *t,
+                g: [Vector::X, Vector::Y, Vector::Z],
+                volume: 1.0,
+                c: 1.0,
+                d: 1.0,
+            })
+            .collect()
+    }
+
+    /// The chunks of tet boxes (11 layers of 121 particles, as the bench's box; 10 layers of
+    /// 441; one of a few particles), laid out as given and with the particles numbered at
+    /// random: every element in exactly one chunk, next to its lowest vertex (no farther than
+    /// the rounding to whole groups of lanes, where every chunk's elements start); a multiple of
+    /// four chunks; each chunk's estimated work within the largest particle's and a group's of
+    /// the mean, so that the first half of the chunks (one thread's share of two) holds half
+    /// the work to 1 %. Borders at even particle counts fail it (the first chunk of the
+    /// 11-layer box 6.5 % over the mean).
+    #[test]
+    fn chunks_share_the_estimated_work_evenly() {
+        let mut rng = crate::math::test_rng(0x2545_f491_4f6c_dd1d);
+        for cells in [[10, 10, 10], [20, 20, 9], [2, 1, 1]] {
+            let mesh = TetMesh::tet_box([0.1, 0.1, 0.1], cells).unwrap();
+            let given = elements(&mesh);
+            let n = mesh.vertices.len();
+            let mut shuffled = given.clone();
+            let mut perm: Vec<u32> = (0..n as u32).collect();
+            for i in (1..n).rev() {
+                let j = ((rng() + 1.0) / 2.0 * (i + 1) as f64) as usize;
+                perm.swap(i, j.min(i));
+            }
+            for e in &mut shuffled {
+                e.v = e.v.map(|p| perm[p as usize]);
+            }
+            for given in [given, shuffled] {
+                let m = given.len();
+                let t = TetForces::layout(given);
+                let count = t.chunks();
+                assert!(count <= 2 || count % 4 == 0, "{count} chunks");
+                assert_eq!(t.borders[0], 0);
+                assert_eq!(t.borders[count] as usize, n);
+                assert!(t.borders.windows(2).all(|w| w[0] < w[1]));
+                assert_eq!(t.element_start[0], 0);
+                assert_eq!(t.element_start[count] as usize, m);
+                assert!(t.element_start.windows(2).all(|w| w[0] <= w[1]));
+                // Whole groups of lanes: no element left to the scalar kernel but the last few.
+                assert!(
+                    t.element_start[..count]
+                        .iter()
+                        .all(|&e| e as usize % ELEMENT_GROUP == 0)
+                );
+                let mut below = vec![0u64; n];
+                for e in &t.elements {
+                    below[*e.v.iter().min().unwrap() as usize] += 1;
+                }
+                let mut work = vec![0u64; count];
+                let mut largest = 0;
+                for c in 0..count {
+                    let r = t.range(c);
+                    for p in r.clone() {
+                        let slots = (t.start[p + 1] - t.start[p]) as u64;
+                        let w = COST_SLOT * slots + COST_PARTICLE + COST_ELEMENT * below[p];
+                        largest = largest.max(w);
+                        work[c] += w;
+                    }
+                    let (e0, e1) = (t.element_start[c] as usize, t.element_start[c + 1] as usize);
+                    for (k, e) in t.elements[e0..e1].iter().enumerate() {
+                        let low = *e.v.iter().min().unwrap();
+                        let from_edge = k.min(e1 - e0 - 1 - k);
+                        assert!(
+                            r.contains(&(low as usize)) || from_edge < ELEMENT_GROUP / 2,
+                            "chunk {c}: element {} of lowest vertex {low} outside {r:?}",
+                            e0 + k
+                        );
+                    }
+                }
+                let total: u64 = work.iter().sum();
+                let mean = total as f64 / count as f64;
+                let slack = (largest + ELEMENT_GROUP as u64 * COST_ELEMENT) as f64;
+                for (c, &w) in work.iter().enumerate() {
+                    assert!(
+                        (w as f64 - mean).abs() <= slack,
+                        "chunk {c}: {w} against {mean}"
+                    );
+                }
+                if count >= 4 {
+                    let half: u64 = work[..count / 2].iter().sum();
+                    let share = half as f64 / total as f64;
+                    assert!((share - 0.5).abs() < 0.01, "{share}");
+                }
+            }
         }
     }
 }
@@ -768,13 +956,13 @@ mod tests {
                 }
             })
             .collect();
-        let forces = TetForces::layout(elements.clone());
+        let forces = TetForces::layout(elements);
         let mut buf = vec![Vector::splat(Scalar::NAN); 4 * m];
         // SAFETY: AVX is present; `x` holds every particle; `buf` four slots per element.
         let rest = unsafe { forces.elements_avx(0..m, &x, buf.as_mut_ptr()) };
         assert_eq!(rest, m - m % lane::W);
         let mut signs = [0; 3];
-        for (t, e) in elements.iter().enumerate().take(rest) {
+        for (t, e) in forces.elements.iter().enumerate().take(rest) {
             // SAFETY: as above.
             let want = unsafe { element_forces(e, &x) };
             for a in 0..4 {
