@@ -99,7 +99,15 @@ pub fn spawn_when_loaded(
         }
     }
     *done = true;
-    let mesh = asset.0.clone().transformed(spec.scale, spec.offset);
+    // Renumbered along a Morton curve: the generator's numbers follow no spatial order, and
+    // the force kernels share a body among threads by ranges of particles (nothing here uses
+    // the file's numbers: the pins go by height).
+    let mesh = asset
+        .0
+        .clone()
+        .transformed(spec.scale, spec.offset)
+        .spatially_ordered()
+        .0;
     let display = display_handle.as_ref().and_then(|h| {
         let (mut v, f) = triangle_mesh(meshes.get(h)?)
             .map_err(|e| error!("display mesh: {e}"))

@@ -849,7 +849,7 @@ mod layout_tests {
                 let m = given.len();
                 let t = TetForces::layout(given);
                 let count = t.chunks();
-                assert!(count <= 2 || count % 4 == 0, "{count} chunks");
+                assert!(count <= 2 || count.is_multiple_of(4), "{count} chunks");
                 assert_eq!(t.borders[0], 0);
                 assert_eq!(t.borders[count] as usize, n);
                 assert!(t.borders.windows(2).all(|w| w[0] < w[1]));
@@ -860,7 +860,7 @@ mod layout_tests {
                 assert!(
                     t.element_start[..count]
                         .iter()
-                        .all(|&e| e as usize % ELEMENT_GROUP == 0)
+                        .all(|&e| (e as usize).is_multiple_of(ELEMENT_GROUP))
                 );
                 let mut below = vec![0u64; n];
                 for e in &t.elements {
@@ -868,13 +868,13 @@ mod layout_tests {
                 }
                 let mut work = vec![0u64; count];
                 let mut largest = 0;
-                for c in 0..count {
+                for (c, work_c) in work.iter_mut().enumerate() {
                     let r = t.range(c);
                     for p in r.clone() {
                         let slots = (t.start[p + 1] - t.start[p]) as u64;
                         let w = COST_SLOT * slots + COST_PARTICLE + COST_ELEMENT * below[p];
                         largest = largest.max(w);
-                        work[c] += w;
+                        *work_c += w;
                     }
                     let (e0, e1) = (t.element_start[c] as usize, t.element_start[c + 1] as usize);
                     for (k, e) in t.elements[e0..e1].iter().enumerate() {
