@@ -362,10 +362,10 @@ fn chunks_over<K: Gather>(
 
 /// Sets `f` to every particle's gathered force (zero past the kernel's particles), then runs
 /// `finish` on each chunk on the same thread, in one pass over the kernel's chunks (shared
-/// with the team as [`for_each_range`] shares them). One pass where three (clearing the
-/// forces, gathering, sweeping) each handed every particle to the team: each hand-over costs a
-/// few microseconds on a two-core machine, and a thread sweeps the forces it has just summed
-/// while they are in its cache.
+/// with the team as [`for_each_chunk`] shares them; the particles past the kernel's bound in
+/// chunks of their own). One pass where three (clearing the forces, gathering, sweeping) each
+/// handed every particle to the team: each hand-over costs a few microseconds on a two-core
+/// machine, and a thread sweeps the forces it has just summed while they are in its cache.
 ///
 /// Before it gathers, a chunk claims the cache lines of its border particles' positions and
 /// velocities ([`claim_lines`], [`Gather::border`]): those the force pass read from another
