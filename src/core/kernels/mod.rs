@@ -342,12 +342,12 @@ pub(crate) unsafe fn gather_add<K: Gather>(kernel: &K, buf: &[K::Slot], f: &mut 
 
 /// The chunks of a pass over `n` particles that follows a kernel's chunks: the kernel's, then
 /// the particles past its bound in chunks of [`springs::CHUNK_PARTICLES`] (particles no element
-/// refers to, swept alone). Returns their number and chunk `c`'s range.
+/// refers to, swept alone), for `n ≥` the bound. Returns their number and chunk `c`'s range.
 fn chunks_over<K: Gather>(
     kernel: &K,
     n: usize,
 ) -> (usize, impl Fn(usize) -> std::ops::Range<usize>) {
-    let (own, bound) = (kernel.chunks(), kernel.bound().min(n));
+    let (own, bound) = (kernel.chunks(), kernel.bound());
     let tail = springs::CHUNK_PARTICLES;
     let range = move |c: usize| {
         if c < own {

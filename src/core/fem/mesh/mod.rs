@@ -203,8 +203,8 @@ impl TetMesh {
     /// generators number vertices in no spatial order: the armadillo and bunny in
     /// `assets/meshes` have a median tet spanning 982 and 1054 indices of their 2290 and 2411,
     /// so nearly every tet spans chunks. In this order the armadillo's median tet spans 54,
-    /// and a symplectic Euler step took 57.5 µs on two threads against 70.4 (1.22× as fast;
-    /// 99.8 against 108.3 µs on one; `docs/BENCHMARKS.md`). Use it before
+    /// and a symplectic Euler step took 57.7 µs on two threads against 71.2 (1.23× as fast;
+    /// 100.0 against 108.9 µs on one; best runs, `docs/BENCHMARKS.md`). Use it before
     /// [`TetMesh::to_scene`] or `SpawnSoftBody::spawn_tet_body` when nothing refers to the
     /// file's vertex numbers, or map them through `old`. The same forces, particle for particle
     /// (the same bits).
@@ -229,7 +229,7 @@ impl TetMesh {
             k
         };
         let mut old: Vec<u32> = (0..self.vertices.len() as u32).collect();
-        old.sort_by_key(|&i| key(&self.vertices[i as usize]));
+        old.sort_by_cached_key(|&i| key(&self.vertices[i as usize]));
         let mut new_of = vec![0u32; old.len()];
         for (k, &i) in old.iter().enumerate() {
             new_of[i as usize] = k as u32;
