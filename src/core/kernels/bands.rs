@@ -90,6 +90,12 @@ pub(crate) struct Bands {
 }
 
 impl Bands {
+    /// One past the last particle the force pass of the chunk ending before `p1` reads: its
+    /// particles and the largest offset after them.
+    pub(crate) fn reads_end(&self, p1: usize) -> usize {
+        (p1 + self.omax).min(self.bound)
+    }
+
     /// Splits `springs` into bands and the rest (springs joining a particle to itself go to
     /// the rest, which leaves them out). `None` when no offset has [`MIN_BAND`] springs over
     /// a range they fill at least half of.
@@ -196,21 +202,20 @@ impl Bands {
         &self,
         p0: usize,
         p1: usize,
-        x: &[Vector],
-        v: Option<&[Vector]>,
+        (x, v, from): (&[Vector], Option<&[Vector]>, usize),
         g: *mut Scalar,
         scratch: *mut Scalar,
     ) {
-        let end = (p1 + self.omax).min(self.bound);
+        let end = self.reads_end(p1);
         let m = end - p0;
         let stride = self.chunk + self.omax;
         // SAFETY: the scratch is the chunk's own and holds six columns of `stride ≥ m`.
         let cols = |q: usize| unsafe { std::slice::from_raw_parts_mut(scratch.add(q * stride), m) };
         let (xs, ys, zs) = (cols(0), cols(1), cols(2));
-        to_columns(&x[p0..end], xs, ys, zs);
+        to_columns(&x[p0 - from..end - from], xs, ys, zs);
         let (vx, vy, vz) = (cols(3), cols(4), cols(5));
         if let Some(v) = v {
-            to_columns(&v[p0..end], vx, vy, vz);
+            to_columns(&v[p0 - from..end - from], vx, vy, vz);
         }
         for b in &self.band {
             let (lo0, lo1) = (b.a.max(p0), b.e.min(p1));
@@ -254,7 +259,7 @@ impl Bands {
         p1: usize,
         g: &[Scalar],
         scratch: *mut Scalar,
-        out: *mut Vector,
+        (out, set): (*mut Vector, bool),
     ) {
         // Where every band reaches every particle, a register's width of particles at a time
         // in registers (with AVX: eight in f32, four in f64); elsewhere (and otherwise)
@@ -266,12 +271,12 @@ impl Bands {
             f0 = self.common.start.clamp(p0, p1);
             f1 = f0 + (self.common.end.clamp(f0, p1) - f0) / LANES * LANES;
             // SAFETY: AVX is present; `p0 ≤ f0 ≤ f1 ≤ p1`, every band reaching `f0..f1`.
-            unsafe { self.gather_avx(f0, f1, g, out.add(f0 - p0)) };
+            unsafe { self.gather_avx(f0, f1, g, (out.add(f0 - p0), set)) };
         }
         // SAFETY: as the caller guarantees, on the two parts left.
         unsafe {
-            self.gather_columns(p0, f0, g, scratch, out);
-            self.gather_columns(f1, p1, g, scratch, out.add(f1 - p0));
+            self.gather_columns(p0, f0, g, scratch, (out, set));
+            self.gather_columns(f1, p1, g, scratch, (out.add(f1 - p0), set));
         }
     }
 
@@ -284,7 +289,13 @@ impl Bands {
     /// reaches `p0..p1` (`a ≤ p0`, `p1 ≤ e + o`).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx")]
-    unsafe fn gather_avx(&self, p0: usize, p1: usize, g: &[Scalar], out: *mut Vector) {
+    unsafe fn gather_avx(
+        &self,
+        p0: usize,
+        p1: usize,
+        g: &[Scalar],
+        (out, set): (*mut Vector, bool),
+    ) {
         #[cfg(feature = "f64")]
         use std::arch::x86_64::{
             _mm256_add_pd as add, _mm256_loadu_pd as load, _mm256_setzero_pd as zero,
@@ -310,7 +321,7 @@ impl Bands {
                 }
             }
             // SAFETY: particles `t − p0..t − p0 + LANES` are in `out`.
-            unsafe { add_rows(s, out.add(t - p0)) };
+            unsafe { add_rows(s, out.add(t - p0), set) };
         }
     }
 
@@ -324,7 +335,7 @@ impl Bands {
         p1: usize,
         g: &[Scalar],
         scratch: *mut Scalar,
-        out: *mut Vector,
+        (out, set): (*mut Vector, bool),
     ) {
         if p0 >= p1 {
             return;
@@ -353,7 +364,10 @@ impl Bands {
         }
         for (q, ((x, y), z)) in sx.iter().zip(&*sy).zip(&*sz).enumerate() {
             // SAFETY: `q < m ≤` what `out` holds.
-            unsafe { *out.add(q) += Vector::new(*x, *y, *z) };
+            unsafe {
+                let o = out.add(q);
+                *o = if set { Vector::ZERO } else { *o } + Vector::new(*x, *y, *z);
+            }
         }
     }
 
@@ -382,13 +396,13 @@ impl Bands {
 /// AVX is present; `out` holds [`LANES`] vectors.
 #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
 #[target_feature(enable = "avx")]
-unsafe fn add_rows(s: [std::arch::x86_64::__m256; 3], out: *mut Vector) {
+unsafe fn add_rows(s: [std::arch::x86_64::__m256; 3], out: *mut Vector, set: bool) {
     use std::arch::x86_64::*;
     for (q, row) in super::avx::rows(s[0], s[1], s[2]).into_iter().enumerate() {
         // SAFETY: `q < LANES`, within `out`; a `Vec3A` is an aligned `__m128`.
         unsafe {
             let o = out.add(q) as *mut __m128;
-            *o = _mm_add_ps(*o, row);
+            *o = _mm_add_ps(if set { _mm_setzero_ps() } else { *o }, row);
         }
     }
 }
@@ -399,14 +413,19 @@ unsafe fn add_rows(s: [std::arch::x86_64::__m256; 3], out: *mut Vector) {
 /// As the f32 build's.
 #[cfg(all(target_arch = "x86_64", feature = "f64"))]
 #[target_feature(enable = "avx")]
-unsafe fn add_rows(s: [std::arch::x86_64::__m256d; 3], out: *mut Vector) {
+unsafe fn add_rows(s: [std::arch::x86_64::__m256d; 3], out: *mut Vector, set: bool) {
     use std::arch::x86_64::*;
     let o = out as *mut f64;
     for (k, row) in super::avx::rows3(s[0], s[1], s[2]).into_iter().enumerate() {
         // SAFETY: `DVec3` is three packed `f64`s; the twelve of four particles are in `out`.
         unsafe {
             let o = o.add(4 * k);
-            _mm256_storeu_pd(o, _mm256_add_pd(_mm256_loadu_pd(o), row));
+            let was = if set {
+                _mm256_setzero_pd()
+            } else {
+                _mm256_loadu_pd(o)
+            };
+            _mm256_storeu_pd(o, _mm256_add_pd(was, row));
         }
     }
 }
@@ -794,17 +813,24 @@ mod tests {
                 Vector::new(p * 0.25, -p * 0.5, p + 0.125)
             })
             .collect();
-        let (mut fast, mut plain) = (start.clone(), start);
-        // SAFETY: the scratch and outputs are the chunk's (all `n` particles).
-        unsafe {
-            bands.gather(0, n, &g, scratch.as_mut_ptr(), fast.as_mut_ptr());
-            bands.gather_columns(0, n, &g, scratch.as_mut_ptr(), plain.as_mut_ptr());
-        }
         let bits = |a: &[Vector]| {
             a.iter()
                 .map(|v| v.to_array().map(Scalar::to_bits))
                 .collect::<Vec<_>>()
         };
-        assert_eq!(bits(&fast), bits(&plain));
+        // Added to the forces there, and setting them (the bits of adding to zeroed forces).
+        let zeroed = vec![Vector::ZERO; n];
+        for (set, want) in [(false, &start), (true, &zeroed)] {
+            let (mut fast, mut plain, mut set_plain) = (start.clone(), start.clone(), want.clone());
+            let s = scratch.as_mut_ptr();
+            // SAFETY: the scratch and outputs are the chunk's (all `n` particles).
+            unsafe {
+                bands.gather(0, n, &g, s, (fast.as_mut_ptr(), set));
+                bands.gather_columns(0, n, &g, s, (plain.as_mut_ptr(), set));
+                bands.gather_columns(0, n, &g, s, (set_plain.as_mut_ptr(), false));
+            }
+            assert_eq!(bits(&fast), bits(&plain), "set {set}");
+            assert_eq!(bits(&fast), bits(&set_plain), "set {set}");
+        }
     }
 }

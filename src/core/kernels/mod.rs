@@ -10,9 +10,12 @@
 //! - **A step allocates nothing.** Layouts and their scratch buffers are built once, on the
 //!   first evaluation after the topology changed.
 //!
-//! Both work in two passes: first every element's forces (a spring's on its lower particle,
+//! Both work in two phases: first every element's forces (a spring's on its lower particle,
 //! a tet's on its four) into its own slots, several elements at a time in AVX lanes where the
-//! processor has it; then every particle sums its slots in a fixed order. [`springs`] keeps
+//! processor has it; then every particle sums its slots in a fixed order. On a team of
+//! threads, a symplectic Euler step runs both as one pass (`force_gather_set_then`): each
+//! chunk's sums wait only for the force chunks that write its slots, not for every thread to
+//! finish its forces. [`springs`] keeps
 //! springs in rows by their lower particle index, so a particle's own row is contiguous,
 //! and hands the springs of a structured mesh (a grid's, which fall into a few offsets
 //! between their particles) to [`bands`], which evaluates them on contiguous columns;
@@ -139,6 +142,108 @@ pub(crate) fn for_each_chunk(chunks: usize, job: impl Fn(usize) + Sync + Send) {
     }
 }
 
+/// Each chunk's mark that the first phase of a two-phase pass ([`for_each_chunk_in_two`]) is
+/// done with it: the number of the pass, on a cache line of its own (two: the adjacent-line
+/// prefetcher pairs them), so that the thread marking a chunk never shares a line with one
+/// waiting for another. Kept by the kernel whose passes they are (sized with its layout, so a
+/// pass allocates nothing).
+#[derive(Debug, Default)]
+#[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+pub(crate) struct PhaseFlags {
+    pass: std::sync::atomic::AtomicU64,
+    done: Vec<Flag>,
+}
+
+#[repr(align(128))]
+#[derive(Debug, Default)]
+#[cfg_attr(not(feature = "parallel"), allow(dead_code))]
+struct Flag(std::sync::atomic::AtomicU64);
+
+impl PhaseFlags {
+    /// Marks for `chunks` chunks.
+    pub(crate) fn new(chunks: usize) -> Self {
+        Self {
+            pass: Default::default(),
+            done: (0..chunks).map(|_| Flag::default()).collect(),
+        }
+    }
+}
+
+impl Clone for PhaseFlags {
+    fn clone(&self) -> Self {
+        Self::new(self.done.len())
+    }
+}
+
+/// Runs `first(c)` for every chunk `c` in `0..chunks`, then `second(c)` for every chunk, where
+/// `second(c)` needs the first phases of the chunks `after(c)` (a range ending at `c` or
+/// before; the marks in `flags` cover them) done and nothing else: on the team (see
+/// [`for_each_chunk`]) as one pass, whose threads run their share's first phases and then go
+/// on to their second phases, waiting only where one needs a first phase another thread has
+/// not finished — instead of two passes and the wait for the slowest thread between them.
+/// The bits are the same as one thread running every first phase and then every second.
+#[inline]
+pub(crate) fn for_each_chunk_in_two(
+    chunks: usize,
+    flags: &PhaseFlags,
+    first: impl Fn(usize) + Sync + Send,
+    after: impl Fn(usize) -> std::ops::Range<usize> + Sync + Send,
+    second: impl Fn(usize) + Sync + Send,
+) {
+    #[cfg(feature = "parallel")]
+    if chunks > 1 {
+        use std::sync::atomic::Ordering::{Acquire, Relaxed, Release};
+        // Only the caller counts passes; the chunks compare against this one's number.
+        let e = flags.pass.load(Relaxed).wrapping_add(1);
+        flags.pass.store(e, Relaxed);
+        /// Marks its chunk done when dropped: also when the first phase panics (the team
+        /// counts that chunk run and the pass's caller panics after the pass), so that no
+        /// second phase waits for ever.
+        struct Mark<'a>(Option<&'a Flag>, u64);
+        impl Drop for Mark<'_> {
+            fn drop(&mut self) {
+                if let Some(f) = self.0 {
+                    f.0.store(self.1, Release);
+                }
+            }
+        }
+        let job = |j: usize| {
+            if j < chunks {
+                let _mark = Mark(flags.done.get(j), e);
+                first(j);
+                return;
+            }
+            let c = j - chunks;
+            for d in after(c) {
+                let Some(f) = flags.done.get(d) else { continue };
+                // The first phases a second one waits for are a share's first work, begun
+                // before its thread's second phases (see `team`): a wait is short, unless
+                // their thread was descheduled, when the core is yielded to it.
+                let mut spins = 0u32;
+                while f.0.load(Acquire) != e {
+                    spins = spins.saturating_add(1);
+                    if spins < 4096 {
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::yield_now();
+                    }
+                }
+            }
+            second(c);
+        };
+        if team::share_in(chunks, 2, &job) {
+            return;
+        }
+    }
+    let _ = (flags, &after);
+    for c in 0..chunks {
+        first(c);
+    }
+    for c in 0..chunks {
+        second(c);
+    }
+}
+
 /// Runs `job(r)` for the consecutive ranges `r` of `chunk` indices that cover `0..n` (the
 /// last one shorter), as [`for_each_chunk`] runs chunks: the particle passes' chunking, in one
 /// place.
@@ -217,7 +322,8 @@ pub(crate) fn chunk_size(n: usize, most: usize) -> usize {
 }
 
 /// A list of indices for each chunk of a pass: `items[start[c]..start[c + 1]]` for chunk `c`
-/// (the particles of a chunk that another chunk's elements read, for [`gather_set_then`]).
+/// (the particles of a chunk that another chunk's elements read, for
+/// [`force_gather_set_then`]).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ChunkLists {
     start: Vec<u32>,
@@ -275,14 +381,16 @@ pub(crate) fn claim_lines<T>(s: &mut [T], items: &[u32], base: usize) {
     }
 }
 
-/// Asks for the cache lines of `s[i]` for each `i` of `items` (sorted), once a line, without
-/// waiting for them: a pass asks at a chunk's start for what another core last wrote and the
-/// chunk reads only near its end, and the lines arrive while it works.
+/// Asks for the cache lines of `s[i − from]` for each `i` of `items` (sorted), once a line,
+/// without waiting for them: a pass asks at a chunk's start for what another core last wrote
+/// and the chunk reads only near its end, and the lines arrive while it works.
 #[inline]
-pub(crate) fn prefetch<T>(s: &[T], items: &[u32]) {
+pub(crate) fn prefetch<T>(s: &[T], items: &[u32], from: usize) {
     let mut last = usize::MAX;
     for &i in items {
-        let Some(e) = s.get(i as usize) else { continue };
+        let Some(e) = (i as usize).checked_sub(from).and_then(|i| s.get(i)) else {
+            continue;
+        };
         let line = e as *const T as usize / 64;
         if line != last {
             last = line;
@@ -360,12 +468,18 @@ fn chunks_over<K: Gather>(
     (own + (n - bound).div_ceil(tail), range)
 }
 
-/// Sets `f` to every particle's gathered force (zero past the kernel's particles), then runs
-/// `finish` on each chunk on the same thread, in one pass over the kernel's chunks (shared
-/// with the team as [`for_each_chunk`] shares them; the particles past the kernel's bound in
-/// chunks of their own). One pass where three (clearing the forces, gathering, sweeping) each
-/// handed every particle to the team: each hand-over costs a few microseconds on a two-core
-/// machine, and a thread sweeps the forces it has just summed while they are in its cache.
+/// A kernel's force pass, then every particle's gathered force set into `f` (zero past the
+/// kernel's particles) and `finish` run on each chunk on the thread that gathered it — in one
+/// pass of the team ([`for_each_chunk_in_two`]; the particles past the kernel's bound in
+/// chunks of their own). `force(c, reads)` evaluates chunk `c`'s elements into their slots,
+/// reading the particles `reads(c)` of `x` and `v` (handed to it as slices of those alone);
+/// chunk `c`'s gather and `finish` wait for the force chunks from `first_reader(c)` to `c` —
+/// those whose reads reach its particles — and for no other. One pass where there were four
+/// (the forces, clearing them, gathering, sweeping), each handing every particle to the team
+/// and waiting for its slowest thread: a hand-over costs a few microseconds on a two-core
+/// machine, a thread goes on from its force chunks to its gathers without waiting for the
+/// other threads' force chunks, and it sweeps the forces it has just summed while they are in
+/// its cache.
 ///
 /// Before it gathers, a chunk claims the cache lines of its border particles' positions and
 /// velocities ([`claim_lines`], [`Gather::border`]): those the force pass read from another
@@ -375,13 +489,29 @@ fn chunks_over<K: Gather>(
 /// the chunk gathers, and its sweep took 1.8 µs (a write prefetch, `PREFETCHW`, left it at
 /// 3.8).
 ///
+/// Which memory a job touches: a force chunk reads its `reads` of `x` and `v` (which no
+/// gather writes meanwhile: those of the chunks it reaches wait for it) and writes its own
+/// slots; a gather reads the slots of the force chunks it waited for and writes its own
+/// particles. The gathers see the slots through `buf`, a shared slice over the whole buffer
+/// while other threads' force chunks may still write other slots in it: no slot is read and
+/// written at once, but the slice covers slots being written (the gather kernels address the
+/// buffer by slot index), which Stacked Borrows, unlike Tree Borrows, does not allow.
+///
 /// # Safety
-/// `buf` is the kernel's force pass's.
+/// `force(c, _)` writes only chunk `c`'s slots and reads nothing of `x` and `v` but
+/// `reads(c)`, which starts at or after chunk `c`'s first particle and ends at or before the
+/// bound; every chunk `d > c` with particles in `reads(c)` has `first_reader(d) ≤ c`, and
+/// `first_reader(d) ≤ d`; `buf` holds the slots the force chunks write (the gathers read it).
 ///
 /// # Panics
 /// If `x`, `v` and `f` differ in length.
-pub(crate) unsafe fn gather_set_then<K: Gather>(
+#[allow(clippy::too_many_arguments)]
+pub(crate) unsafe fn force_gather_set_then<K: Gather>(
     kernel: &K,
+    flags: &PhaseFlags,
+    force: impl Fn(usize, Reads) + Sync + Send,
+    reads: impl Fn(usize) -> std::ops::Range<usize> + Sync + Send,
+    first_reader: impl Fn(usize) -> usize + Sync + Send,
     buf: &[K::Slot],
     x: &mut [Vector],
     v: &mut [Vector],
@@ -396,33 +526,98 @@ pub(crate) unsafe fn gather_set_then<K: Gather>(
     let bound = kernel.bound();
     assert!(n >= bound, "forces past the array");
     let (chunks, range) = chunks_over(kernel, n);
+    let own = kernel.chunks();
     let (xp, vp, fp) = (
         SharedMut(x.as_mut_ptr()),
         SharedMut(v.as_mut_ptr()),
         SharedMut(f.as_mut_ptr()),
     );
-    for_each_chunk(chunks, |c| {
-        let r = range(c);
-        // SAFETY: the ranges are disjoint and below `n`, the length of the three slices, which
-        // this function borrows exclusively; each chunk's job alone touches its range.
-        let (x, v, f) = unsafe {
-            (
-                xp.slice(r.clone()),
-                vp.slice(r.clone()),
-                fp.slice(r.clone()),
-            )
-        };
-        let mine = kernel.border().of(c);
-        claim_lines(x, mine, r.start);
-        claim_lines(v, mine, r.start);
-        let end = r.end.min(bound).max(r.start);
-        if end > r.start {
-            // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-            unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+    // The particles past the bound (chunks `own` on) are read by no force chunk.
+    let after = |c: usize| {
+        if c < own {
+            first_reader(c)..c + 1
+        } else {
+            c..c
         }
-        f[end - r.start..].fill(Vector::ZERO);
-        finish(Chunk { range: r, x, v, f });
-    });
+    };
+    for_each_chunk_in_two(
+        chunks,
+        flags,
+        |c| {
+            if c < own {
+                let r = reads(c);
+                // SAFETY: chunk `c`'s reads, below the bound; while it runs no job writes
+                // them (a gather waits for every force chunk whose reads reach its chunk).
+                force(c, unsafe { Reads::new(xp, vp, r) });
+            }
+        },
+        after,
+        |c| {
+            // SAFETY: the ranges are disjoint and below `n`, the length of the three slices,
+            // which this function borrows exclusively; each chunk's job alone touches its
+            // range, and the force chunks that read its particles are done.
+            unsafe { gather_set_chunk(kernel, buf, (xp, vp, fp), c, range(c), finish) }
+        },
+    );
+}
+
+/// What a force chunk of [`force_gather_set_then`] reads of the positions and velocities: the
+/// particles `range`, addressed by their indices in the whole arrays (the slices hold those
+/// particles alone, so that another thread may write the others meanwhile).
+#[derive(Clone, Copy)]
+pub(crate) struct Reads<'a> {
+    pub x: &'a [Vector],
+    pub v: &'a [Vector],
+    pub from: usize,
+}
+
+impl Reads<'_> {
+    /// # Safety
+    /// `r` lies within both arrays, and nothing writes it while the slices live.
+    unsafe fn new(x: SharedMut<Vector>, v: SharedMut<Vector>, r: std::ops::Range<usize>) -> Self {
+        // SAFETY: as the caller guarantees.
+        unsafe {
+            Self {
+                x: std::slice::from_raw_parts(x.ptr().add(r.start), r.len()),
+                v: std::slice::from_raw_parts(v.ptr().add(r.start), r.len()),
+                from: r.start,
+            }
+        }
+    }
+}
+
+/// Chunk `c` (particles `r`) of [`force_gather_set_then`]'s gathers: claims its border lines,
+/// sets its forces to the gathered slots and runs `finish` on it.
+///
+/// # Safety
+/// `r` is below the length of the three arrays, and no other job touches it while this runs;
+/// `buf` is the kernel's force pass's.
+unsafe fn gather_set_chunk<K: Gather>(
+    kernel: &K,
+    buf: &[K::Slot],
+    (xp, vp, fp): (SharedMut<Vector>, SharedMut<Vector>, SharedMut<Vector>),
+    c: usize,
+    r: std::ops::Range<usize>,
+    finish: Finish<'_>,
+) {
+    // SAFETY: as the caller guarantees.
+    let (x, v, f) = unsafe {
+        (
+            xp.slice(r.clone()),
+            vp.slice(r.clone()),
+            fp.slice(r.clone()),
+        )
+    };
+    let mine = kernel.border().of(c);
+    claim_lines(x, mine, r.start);
+    claim_lines(v, mine, r.start);
+    let end = r.end.min(kernel.bound()).max(r.start);
+    if end > r.start {
+        // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
+        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+    }
+    f[end - r.start..].fill(Vector::ZERO);
+    finish(Chunk { range: r, x, v, f });
 }
 
 /// Runs `f` with a team of `threads` threads (`0`: one per core) sharing the force kernels of
@@ -504,6 +699,96 @@ mod tests {
             }
         }
         assert_eq!(chunk_size(0, 1024), 1);
+    }
+
+    /// A two-phase pass on a team of three: every first and second phase runs once a pass,
+    /// and a second phase finds the first phases it waits for done — whichever thread ran
+    /// them, over passes of many sizes, with pauses that let the helpers park (so that
+    /// shares are taken over), and with the waits spanning shares (each second phase waits
+    /// for every first phase before it) or not (each for its own and the one before).
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn a_two_phase_pass_runs_each_phase_once_and_in_order() {
+        use std::sync::atomic::{AtomicU64, Ordering::SeqCst};
+        let team = team::Team::new(3);
+        let flags = PhaseFlags::new(40);
+        let firsts: Vec<AtomicU64> = (0..40).map(|_| AtomicU64::new(0)).collect();
+        let seconds: Vec<AtomicU64> = (0..40).map(|_| AtomicU64::new(0)).collect();
+        team.run(|| {
+            for pass in 1..=600u64 {
+                let chunks = 2 + (pass as usize * 7) % 38;
+                let all = pass % 2 == 0;
+                let after = |c: usize| {
+                    if all {
+                        0..c + 1
+                    } else {
+                        c.saturating_sub(1)..c + 1
+                    }
+                };
+                for_each_chunk_in_two(
+                    chunks,
+                    &flags,
+                    |c| {
+                        if c % 5 == 0 {
+                            std::thread::sleep(std::time::Duration::from_micros(20));
+                        }
+                        firsts[c].fetch_add(1, SeqCst);
+                    },
+                    after,
+                    |c| {
+                        for d in after(c) {
+                            assert_eq!(firsts[d].load(SeqCst), pass, "pass {pass}: {d} before {c}");
+                        }
+                        seconds[c].fetch_add(1, SeqCst);
+                    },
+                );
+                for (c, n) in seconds[..chunks].iter().enumerate() {
+                    assert_eq!(n.load(SeqCst), pass, "pass {pass}, chunk {c}");
+                }
+                // The chunks past this pass's count, brought level for the next.
+                for c in chunks..40 {
+                    firsts[c].fetch_add(1, SeqCst);
+                    seconds[c].fetch_add(1, SeqCst);
+                }
+                if pass % 150 == 0 {
+                    std::thread::sleep(team::SPIN * 3);
+                }
+            }
+        });
+    }
+
+    /// A first phase that panics panics the pass's caller instead of leaving the second phases
+    /// that wait for it waiting, and the team goes on.
+    #[cfg(feature = "parallel")]
+    #[test]
+    fn a_panicking_first_phase_panics_the_caller() {
+        let team = team::Team::new(2);
+        let flags = PhaseFlags::new(8);
+        let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            team.run(|| {
+                for_each_chunk_in_two(
+                    8,
+                    &flags,
+                    |c| assert_ne!(c, 3, "chunk 3"),
+                    |c| 0..c + 1,
+                    |_| {},
+                )
+            })
+        }));
+        assert!(r.is_err());
+        let n = std::sync::atomic::AtomicUsize::new(0);
+        team.run(|| {
+            for_each_chunk_in_two(
+                8,
+                &flags,
+                |_| {},
+                |c| 0..c + 1,
+                |_| {
+                    n.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                },
+            )
+        });
+        assert_eq!(n.into_inner(), 8);
     }
 
     /// The lists against a map built directly, from pairs in random order with repeats.

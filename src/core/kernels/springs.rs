@@ -21,7 +21,10 @@
 //! cut into the same chunks of at most [`CHUNK_PARTICLES`] particles (the force pass takes their
 //! rows), by the body's size alone, so every sum has the same order on any number of threads,
 //! and a thread gathers the slots its own force pass wrote: only the springs that reach into
-//! the next chunk pass their forces, and the positions they read, between cores.
+//! the next chunk pass their forces, and the positions they read, between cores. In a
+//! symplectic Euler step the two passes are one pass of the team
+//! (`force_gather_set_then`): a chunk's gather waits for the force chunks whose
+//! springs reach its particles (on a grid, its own and the one before), not for all of them.
 //!
 //! Springs that fall into bands (a structured mesh's: many springs with one offset between
 //! their particles) are taken by [`super::bands`] instead, in the same chunks and passes: its
@@ -31,7 +34,7 @@
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
 use super::bands::{Bands, LINE};
-use super::{ChunkLists, SharedMut, for_each_range};
+use super::{ChunkLists, PhaseFlags, SharedMut};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
@@ -120,6 +123,13 @@ pub struct SpringRows {
     border: ChunkLists,
     /// For each chunk, the particles of other chunks its rows reach.
     reach: ChunkLists,
+    /// For each chunk: one past the last particle its force pass reads ([`Self::reads`]), and
+    /// the first chunk whose force pass reads any of its particles (its gather waits for
+    /// that chunk's force pass and those after it, up to its own).
+    reads_end: Vec<u32>,
+    first_reader: Vec<u32>,
+    /// The marks of the fused pass's force chunks (`force_gather_set_then`).
+    flags: PhaseFlags,
     /// Each chunk's part of a sum over the springs ([`Self::energy`]).
     partials: Mutex<Vec<f64>>,
     /// The springs of a structured mesh in bands (see [`super::bands`]); the rows above hold
@@ -158,6 +168,25 @@ impl BandBuf {
     }
 }
 
+/// Whether the lane kernels run on this processor (AVX in the f32 build; AVX2 in the f64
+/// build, whose kernels broadcast lanes across the register's halves).
+fn lanes() -> bool {
+    #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
+    return std::arch::is_x86_feature_detected!("avx");
+    #[cfg(all(target_arch = "x86_64", feature = "f64"))]
+    return std::arch::is_x86_feature_detected!("avx2");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
+/// The address particle 0 would have in `x`, which holds the particles from `from` on: with
+/// a spring's byte offsets (`ends`) added, its ends' addresses (only ever those within `x`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn based(x: &[Vector], from: usize) -> *const u8 {
+    (x.as_ptr() as *const u8).wrapping_sub(from * std::mem::size_of::<Vector>())
+}
+
 impl SpringRows {
     /// Lays out `springs` (springs joining a particle to itself exert nothing and are left
     /// out).
@@ -179,6 +208,24 @@ impl SpringRows {
         let border = ChunkLists::new(crossing().map(|(_, j)| (chunk_of(j), j)));
         let reach = ChunkLists::new(crossing().map(|(i, j)| (chunk_of(i), j)));
         let (bands, others) = Bands::split(springs, bound, chunk);
+        let chunks = bound.div_ceil(chunk);
+        let mut reads_end: Vec<u32> = (0..chunks)
+            .map(|c| {
+                let end = ((c + 1) * chunk).min(bound);
+                bands.as_ref().map_or(end, |b| b.reads_end(end)) as u32
+            })
+            .collect();
+        for s in springs.iter().filter(|s| s.i != s.j) {
+            let e = &mut reads_end[chunk_of(s.i.min(s.j))];
+            *e = (*e).max(s.i.max(s.j) + 1);
+        }
+        let mut first_reader: Vec<u32> = (0..chunks as u32).collect();
+        for (c, &end) in reads_end.iter().enumerate() {
+            let reached = c + 1..(end as usize).div_ceil(chunk);
+            for f in &mut first_reader[reached] {
+                *f = (*f).min(c as u32);
+            }
+        }
         let springs = &others[..];
         // Counting sort by the lower index, then by the upper within a row (stable).
         let mut row_start = vec![0u32; bound + 1];
@@ -248,6 +295,9 @@ impl SpringRows {
             chunk,
             border,
             reach,
+            reads_end,
+            first_reader,
+            flags: PhaseFlags::new(chunks),
             partials: Mutex::new(vec![0.0; bound.div_ceil(chunk)]),
             band_buf: BandBuf::for_bands(bands.as_ref(), bound.div_ceil(chunk)),
             bands,
@@ -309,12 +359,52 @@ impl SpringRows {
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         let mut bands = self.band_buf.lock().unwrap_or_else(|e| e.into_inner());
-        // SAFETY: as the caller guarantees.
+        let buf = SharedMut(guard.as_mut_ptr());
+        let (columns, scratch) = bands.lines();
+        let lines = (
+            SharedMut(columns.as_mut_ptr()),
+            SharedMut(scratch.as_mut_ptr()),
+        );
+        let lanes = lanes();
+        let force = |c: usize, r: super::Reads<'_>| {
+            // SAFETY: the chunk's reads (see `force_gather_set_then`); it writes only its own
+            // slots and band entries.
+            unsafe { self.force_chunk(c, (r.x, damped.then_some(r.v), r.from), buf, lines, lanes) }
+        };
+        let reads = |c: usize| self.reads(c);
+        let after = |c: usize| self.first_reader[c] as usize;
+        // SAFETY: as the caller guarantees; `force` and `reads` as `force_gather_set_then`
+        // asks. The gathers take the slots and columns as shared slices while force chunks
+        // write other entries of them: no entry a gather reads is written while it runs (it
+        // waits for every force chunk that writes one), and no entry a force chunk writes is
+        // read meanwhile.
         unsafe {
-            self.force_pass(x, damped.then_some(&*v), &mut guard, &mut bands);
+            let guard: &[Slot] = &guard;
             match self.with_bands(&mut bands) {
-                Some(w) => super::gather_set_then(&w, &guard, x, v, f, finish),
-                None => super::gather_set_then(self, &guard, x, v, f, finish),
+                Some(w) => super::force_gather_set_then(
+                    &w,
+                    &self.flags,
+                    force,
+                    reads,
+                    after,
+                    guard,
+                    x,
+                    v,
+                    f,
+                    finish,
+                ),
+                None => super::force_gather_set_then(
+                    self,
+                    &self.flags,
+                    force,
+                    reads,
+                    after,
+                    guard,
+                    x,
+                    v,
+                    f,
+                    finish,
+                ),
             }
         }
     }
@@ -374,41 +464,70 @@ impl SpringRows {
             SharedMut(columns.as_mut_ptr()),
             SharedMut(scratch.as_mut_ptr()),
         );
-        // The f64 kernels broadcast lanes across the register's halves (AVX2).
-        #[cfg(all(target_arch = "x86_64", not(feature = "f64")))]
-        let avx = std::arch::is_x86_feature_detected!("avx");
-        #[cfg(all(target_arch = "x86_64", feature = "f64"))]
-        let avx = std::arch::is_x86_feature_detected!("avx2");
-        for_each_range(self.bound(), self.chunk, |c| {
-            let r = self.row_start[c.start] as usize..self.row_start[c.end] as usize;
-            let s1 = r.end;
-            // The rows at the chunk's end reach into the next chunk, whose positions (and
-            // velocities) another thread's sweep may have written last: asked for now, they
-            // arrive while the first rows are evaluated (two threads, the same run: bench
-            // cloth 31.3 → 31.0 µs a step, 32² cloth 10.8 → 10.0).
-            let reach = self.reach.of(c.start / self.chunk);
-            super::prefetch(x, reach);
-            if let Some(v) = v {
-                super::prefetch(v, reach);
-            }
-            // SAFETY: indices are below the bound the caller guarantees; a chunk writes only
-            // its own springs' slots.
-            unsafe {
-                #[allow(unused_mut)]
-                let mut s = r.start;
-                #[cfg(target_arch = "x86_64")]
-                if avx && !self.ends.is_empty() {
-                    s = self.forces_avx(s, s1, x, v, buf.ptr());
-                }
-                self.forces(s, s1, x, v, buf.ptr());
-                // The bands' springs of the chunk's particles, into their columns (each chunk
-                // its own entries) through the chunk's own scratch.
-                if let Some(b) = &self.bands {
-                    let at = c.start / self.chunk * b.scratch_len();
-                    b.forces(c.start, c.end, x, v, columns.ptr(), scratch.ptr().add(at));
-                }
-            }
+        let lanes = lanes();
+        super::for_each_chunk(self.chunks(), |c| {
+            // SAFETY: as the caller guarantees; a chunk writes only its own springs' slots and
+            // its bands' entries.
+            unsafe { self.force_chunk(c, (x, v, 0), buf, (columns, scratch), lanes) }
         });
+    }
+
+    /// Chunk `c`'s springs: each row spring's force on its lower particle into its slot of
+    /// `buf`, each band spring's into its band's force columns (through the chunk's scratch).
+    /// `x` and `v` hold the particles from `from` on (at least up to what the chunk reads:
+    /// [`Self::reads`]).
+    ///
+    /// # Safety
+    /// `x` and `v` (when given) hold the chunk's reads; `buf` has a slot per spring, the
+    /// columns and scratch are the band buffers'; nothing else writes the chunk's slots and
+    /// entries meanwhile.
+    unsafe fn force_chunk(
+        &self,
+        c: usize,
+        (x, v, from): (&[Vector], Option<&[Vector]>, usize),
+        buf: SharedMut<Slot>,
+        (columns, scratch): (SharedMut<Scalar>, SharedMut<Scalar>),
+        lanes: bool,
+    ) {
+        let _ = lanes;
+        let p = c * self.chunk..((c + 1) * self.chunk).min(self.bound());
+        let r = self.row_start[p.start] as usize..self.row_start[p.end] as usize;
+        let s1 = r.end;
+        // The rows at the chunk's end reach into the next chunk, whose positions (and
+        // velocities) another thread's sweep may have written last: asked for now, they
+        // arrive while the first rows are evaluated (two threads, the same run: bench
+        // cloth 31.3 → 31.0 µs a step, 32² cloth 10.8 → 10.0).
+        let reach = self.reach.of(c);
+        super::prefetch(x, reach, from);
+        if let Some(v) = v {
+            super::prefetch(v, reach, from);
+        }
+        // SAFETY: as the caller guarantees.
+        unsafe {
+            #[allow(unused_mut)]
+            let mut s = r.start;
+            #[cfg(target_arch = "x86_64")]
+            if lanes && !self.ends.is_empty() {
+                s = self.forces_avx(s, s1, (x, v, from), buf.ptr());
+            }
+            self.forces(s, s1, (x, v, from), buf.ptr());
+            if let Some(b) = &self.bands {
+                let at = c * b.scratch_len();
+                b.forces(
+                    p.start,
+                    p.end,
+                    (x, v, from),
+                    columns.ptr(),
+                    scratch.ptr().add(at),
+                );
+            }
+        }
+    }
+
+    /// The particles chunk `c`'s force pass reads: from its first, up to the farthest upper
+    /// end of its springs (of its bands, the chunk and the largest offset after it).
+    fn reads(&self, c: usize) -> std::ops::Range<usize> {
+        c * self.chunk..self.reads_end[c] as usize
     }
 
     /// Particle `p`'s row (the slots it adds) and the springs where it is the upper end (the
@@ -486,15 +605,14 @@ impl SpringRows {
         &self,
         s: usize,
         s1: usize,
-        x: &[Vector],
-        v: Option<&[Vector]>,
+        (x, v, from): (&[Vector], Option<&[Vector]>, usize),
         buf: *mut Slot,
     ) {
         for s in s..s1 {
             // SAFETY: as the caller guarantees.
             unsafe {
-                let i = *self.col_i.get_unchecked(s) as usize;
-                let j = *self.j.get_unchecked(s) as usize;
+                let i = *self.col_i.get_unchecked(s) as usize - from;
+                let j = *self.j.get_unchecked(s) as usize - from;
                 let (rest, k) = (*self.rest.get_unchecked(s), *self.k.get_unchecked(s));
                 let d = *x.get_unchecked(i) - *x.get_unchecked(j);
                 let l = d.length();
@@ -524,15 +642,14 @@ impl SpringRows {
         &self,
         s: usize,
         s1: usize,
-        x: &[Vector],
-        v: Option<&[Vector]>,
+        (x, v, from): (&[Vector], Option<&[Vector]>, usize),
         buf: *mut Slot,
     ) -> usize {
         // SAFETY: as the caller guarantees.
         unsafe {
             match v {
-                Some(v) => self.lanes_f32::<true>(s, s1, x, v, buf),
-                None => self.lanes_f32::<false>(s, s1, x, x, buf),
+                Some(v) => self.lanes_f32::<true>(s, s1, (x, v, from), buf),
+                None => self.lanes_f32::<false>(s, s1, (x, x, from), buf),
             }
         }
     }
@@ -549,8 +666,7 @@ impl SpringRows {
         &self,
         mut s: usize,
         s1: usize,
-        x: &[Vector],
-        v: &[Vector],
+        (x, v, from): (&[Vector], &[Vector], usize),
         buf: *mut Slot,
     ) -> usize {
         use super::avx::columns;
@@ -561,7 +677,7 @@ impl SpringRows {
         unsafe {
             let zero = _mm256_setzero_ps();
             let one = _mm256_set1_ps(1.0);
-            let (xb, vb) = (x.as_ptr() as *const u8, v.as_ptr() as *const u8);
+            let (xb, vb) = (based(x, from), based(v, from));
             let ends = self.ends.as_ptr();
             let (rest_p, k_p, damping_p) =
                 (self.rest.as_ptr(), self.k.as_ptr(), self.damping.as_ptr());
@@ -672,8 +788,7 @@ impl SpringRows {
         &self,
         mut s: usize,
         s1: usize,
-        x: &[Vector],
-        v: Option<&[Vector]>,
+        (x, v, from): (&[Vector], Option<&[Vector]>, usize),
         buf: *mut Slot,
     ) -> usize {
         use super::avx::transpose_pd;
@@ -689,11 +804,11 @@ impl SpringRows {
             while s + 4 <= s1 {
                 // The byte offsets of each spring's ends (see `ends`).
                 let e = |q: usize| *ends.add(s + q);
-                let load = |a: &[Vector], o: u32| {
-                    _mm256_maskload_pd((a.as_ptr() as *const u8).add(o as usize) as *const f64, xyz)
-                };
+                let load =
+                    |a: *const u8, o: u32| _mm256_maskload_pd(a.add(o as usize) as *const f64, xyz);
                 let diff = |a: &[Vector], q: usize| {
                     let [oi, oj] = e(q);
+                    let a = based(a, from);
                     _mm256_sub_pd(load(a, oi), load(a, oj))
                 };
                 let col = |a: &[Scalar]| _mm256_loadu_pd(a.as_ptr().add(s));
@@ -816,13 +931,14 @@ impl super::Gather for WithBands<'_> {
         // SAFETY: as the caller guarantees; `p0` starts a chunk (the gathers hand over whole
         // chunks), whose scratch this is.
         unsafe {
-            if !self.rows.k.is_empty() {
+            // Every spring in a band (a plain grid): nothing to sum by rows, and the bands set
+            // the forces (as `0 + sum`, the bits of adding to zeroed forces).
+            let rows = !self.rows.k.is_empty();
+            if rows {
                 <SpringRows as super::Gather>::gather_chunk(self.rows, p0, p1, buf, out, set);
-            } else if set {
-                // Every spring is in a band (a plain grid): nothing to sum by rows.
-                std::slice::from_raw_parts_mut(out, p1 - p0).fill(Vector::ZERO);
             }
             let at = p0 / self.rows.chunk * self.bands.scratch_len();
+            let out = (out, set && !rows);
             (self.bands).gather(p0, p1, self.columns, self.scratch.ptr().add(at), out);
         }
     }
@@ -849,9 +965,84 @@ impl Clone for SpringRows {
             chunk: self.chunk,
             border: self.border.clone(),
             reach: self.reach.clone(),
+            reads_end: self.reads_end.clone(),
+            first_reader: self.first_reader.clone(),
+            flags: self.flags.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
             band_buf: BandBuf::for_bands(self.bands.as_ref(), self.chunks()),
             bands: self.bands.clone(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What each chunk's force pass reads, and the first chunk whose reads reach each chunk,
+    /// against a direct count over the springs: on a grid (its springs in bands, which read
+    /// the largest offset past their chunk) and on random networks with long springs (some
+    /// reaching several chunks up, some none).
+    #[test]
+    fn reads_and_first_readers_match_the_springs() {
+        let spring = |i: u32, j: u32| PackedSpring {
+            i,
+            j,
+            rest: 0.1,
+            k: 10.0,
+            damping: 0.0,
+        };
+        let w = 64u32;
+        let grid: Vec<PackedSpring> = (0..w * w)
+            .flat_map(|p| [1, w - 1, w, w + 1, 2, 2 * w].map(move |o| (p, p + o)))
+            .filter(|&(_, q)| q < w * w)
+            .map(|(p, q)| spring(q, p))
+            .collect();
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move |k: u32| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed % k as u64) as u32
+        };
+        let mut networks = vec![grid];
+        for n in [3000u32, 9000] {
+            let mut s: Vec<PackedSpring> = (0..n)
+                .map(|_| {
+                    let i = rnd(n);
+                    let j = if rnd(8) == 0 {
+                        rnd(n)
+                    } else {
+                        (i + rnd(40)).min(n - 1)
+                    };
+                    spring(i, j)
+                })
+                .collect();
+            s.push(spring(0, n - 1));
+            networks.push(s);
+        }
+        for springs in networks {
+            let rows = SpringRows::new(&springs);
+            let chunks = rows.chunks();
+            assert!(chunks >= 2);
+            let bound = rows.bound();
+            let first = |c: usize| c * rows.chunk;
+            let mut end: Vec<usize> = (0..chunks)
+                .map(|c| match &rows.bands {
+                    Some(b) => b.reads_end(first(c + 1).min(bound)),
+                    None => first(c + 1).min(bound),
+                })
+                .collect();
+            for s in springs.iter().filter(|s| s.i != s.j) {
+                let (lo, hi) = (s.i.min(s.j) as usize, s.i.max(s.j) as usize);
+                let c = lo / rows.chunk;
+                end[c] = end[c].max(hi + 1);
+            }
+            for c in 0..chunks {
+                assert_eq!(rows.reads(c), first(c)..end[c], "chunk {c}");
+                let want = (0..=c).find(|&d| end[d] > first(c)).unwrap();
+                assert_eq!(rows.first_reader[c] as usize, want, "chunk {c}");
+            }
         }
     }
 }

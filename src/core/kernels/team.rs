@@ -2,7 +2,12 @@
 //! their own share of a pass's chunks (taking over only a share nobody has begun within
 //! [`GRACE`]), and helpers that find no pass spin for a while before they sleep.
 //!
-//! Why not a work-stealing pool: a step of a large body is two or three short parallel passes
+//! A pass may come in two phases (`share_in`): each thread runs the first phases of its
+//! share's chunks and goes on to their second phases, which may wait for the first phases of
+//! chunks before them (a force kernel's sums waiting for the forces they sum), so that a step
+//! hands its chunks to the team once instead of once per phase.
+//!
+//! Why not a work-stealing pool: a step of a large body is one to three short parallel passes
 //! (tens of microseconds each) with a few microseconds of serial work between them, frame
 //! after frame. A pool whose idle workers go to sleep within microseconds pays a wake-up for
 //! nearly every pass, and in a virtual machine a wake-up goes through the hypervisor: on the
@@ -40,6 +45,34 @@ pub const GRACE: Duration = Duration::from_micros(5);
 /// springs it evaluated, their slots still in its own cache).
 fn share_of(t: usize, threads: usize, chunks: usize) -> std::ops::Range<usize> {
     t * chunks / threads..(t + 1) * chunks / threads
+}
+
+/// The places in claim order of share `t`'s jobs in a pass of `chunks` chunks in `phases`
+/// phases (1 or 2): `phases` jobs for each chunk of [`share_of`].
+fn jobs_of(t: usize, threads: usize, chunks: usize, phases: usize) -> std::ops::Range<usize> {
+    let r = share_of(t, threads, chunks);
+    phases * r.start..phases * r.end
+}
+
+/// The job at place `k` of share `share` ([`jobs_of`]). One phase: chunk `k`. Two phases
+/// (jobs `c` and `chunks + c` for chunk `c`'s first and second): the share's chunks' first
+/// phases from its last chunk down (the next share's second phases wait for the last ones),
+/// then their second phases in order (the first of them reads what the share's first phases
+/// wrote last, still in the cache). A share's first phases never wait for anything, and a
+/// second phase waits only for first phases of its own share or of shares before it: whoever
+/// runs a share, every pass ends.
+fn job_at(k: usize, share: &std::ops::Range<usize>, chunks: usize, phases: usize) -> usize {
+    if phases == 1 {
+        return k;
+    }
+    let (a, b) = (share.start / 2, share.end / 2);
+    let i = k - share.start;
+    let n = b - a;
+    if i < n {
+        b - 1 - i
+    } else {
+        chunks + a + (i - n)
+    }
 }
 
 /// Bits of a share's claim word, and of a thread's done word, that count chunks (a pass of
@@ -85,8 +118,9 @@ struct Shared {
     /// The pass's job, `*const (dyn Fn(usize) + Sync)` as two words: valid while pass
     /// `seq / 2` runs, which a helper knows by claiming one of its chunks.
     job: [AtomicUsize; 2],
-    /// The pass's number of chunks.
+    /// The pass's number of chunks, and of phases (jobs per chunk: see [`job_at`]).
     chunks: AtomicUsize,
+    phases: AtomicUsize,
     /// Helpers parked, or about to.
     parked: AtomicUsize,
     stop: AtomicBool,
@@ -150,19 +184,26 @@ impl Shared {
         }
     }
 
-    /// Runs the chunks of share `t` of pass `e` that nobody else claims; returns how many.
-    fn run_share(&self, t: usize, e: u64, chunks: usize, f: &(dyn Fn(usize) + Sync)) -> u64 {
-        let share = share_of(t, self.threads(), chunks);
+    /// Runs the jobs of share `t` of pass `e` that nobody else claims; returns how many.
+    fn run_share(
+        &self,
+        t: usize,
+        e: u64,
+        (chunks, phases): (usize, usize),
+        f: &(dyn Fn(usize) + Sync),
+    ) -> u64 {
+        let share = jobs_of(t, self.threads(), chunks, phases);
         let mut ran = 0;
-        while let Some(c) = self.claim(t, e, &share) {
-            self.run_chunk(f, c);
+        while let Some(k) = self.claim(t, e, &share) {
+            self.run_chunk(f, job_at(k, &share, chunks, phases));
             ran += 1;
         }
         ran
     }
 
-    /// Runs `f` on every chunk, sharing them with the helpers; returns when all are done.
-    fn run(&self, chunks: usize, f: &(dyn Fn(usize) + Sync)) {
+    /// Runs `f` on every job of `chunks` chunks in `phases` phases ([`job_at`]), sharing them
+    /// with the helpers; returns when all are done.
+    fn run(&self, chunks: usize, phases: usize, f: &(dyn Fn(usize) + Sync)) {
         let threads = self.threads();
         let e = self.seq.load(Relaxed) / 2 + 1;
         // SAFETY (of the helpers' use of the job): a helper calls it only for a chunk of pass
@@ -174,6 +215,7 @@ impl Shared {
         self.job[0].store(job[0], Relaxed);
         self.job[1].store(job[1], Relaxed);
         self.chunks.store(chunks, Relaxed);
+        self.phases.store(phases, Relaxed);
         self.seq.store(2 * e, Release);
         // A helper that parks while this is published may miss the wake-up: its share is
         // taken over after `GRACE`, and the next pass wakes it.
@@ -186,10 +228,12 @@ impl Shared {
         }
         // The caller's own share: only it claims there.
         let mut mine = 0;
-        for c in share_of(0, threads, chunks) {
-            self.run_chunk(f, c);
+        let share = jobs_of(0, threads, chunks, phases);
+        for k in share.clone() {
+            self.run_chunk(f, job_at(k, &share, chunks, phases));
             mine += 1;
         }
+        let jobs = phases * chunks;
         let finished = |t: usize| {
             let d = self.done[t].0.load(Acquire);
             if order(d >> COUNT_BITS, e) == std::cmp::Ordering::Equal {
@@ -203,7 +247,7 @@ impl Shared {
         let mut looked = false;
         loop {
             let total: u64 = mine + (1..threads).map(finished).sum::<u64>();
-            if total as usize >= chunks {
+            if total as usize >= jobs {
                 break;
             }
             // A share not begun within `GRACE` (its helper parked, descheduled or gone) is
@@ -213,7 +257,7 @@ impl Shared {
                 looked = true;
                 for t in 1..threads {
                     if finished(t) == 0 && !self.begun(t, e) {
-                        mine += self.run_share(t, e, chunks, f);
+                        mine += self.run_share(t, e, (chunks, phases), f);
                     }
                 }
             }
@@ -241,13 +285,19 @@ impl Shared {
     /// noted, so that the pass ends and its caller panics after it.
     ///
     /// `f` is called only for a chunk claimed in pass `e`, which keeps it valid (see `run`).
-    fn work(&self, me: usize, e: u64, chunks: usize, f: *const (dyn Fn(usize) + Sync)) {
+    fn work(
+        &self,
+        me: usize,
+        e: u64,
+        (chunks, phases): (usize, usize),
+        f: *const (dyn Fn(usize) + Sync),
+    ) {
         let threads = self.threads();
         let mut ran = 0u64;
         let count = |ran: u64| self.done[me].0.store(e << COUNT_BITS | ran, Release);
         for k in 0..threads - 1 {
             let t = 1 + (me - 1 + k) % (threads - 1);
-            let share = share_of(t, threads, chunks);
+            let share = jobs_of(t, threads, chunks, phases);
             if k > 0 && !share.is_empty() {
                 let since = Instant::now();
                 let begun = loop {
@@ -264,9 +314,9 @@ impl Shared {
                 }
             }
             while let Some(c) = self.claim(t, e, &share) {
-                // SAFETY: chunk `c` of pass `e` is claimed and not yet counted done, so pass
+                // SAFETY: job `c` of pass `e` is claimed and not yet counted done, so pass
                 // `e`'s caller is still waiting and its job alive for this call.
-                self.run_chunk(unsafe { &*f }, c);
+                self.run_chunk(unsafe { &*f }, job_at(c, &share, chunks, phases));
                 ran += 1;
                 count(ran);
             }
@@ -283,6 +333,7 @@ impl Shared {
             if s.is_multiple_of(2) && s / 2 != seen {
                 let job = [self.job[0].load(Relaxed), self.job[1].load(Relaxed)];
                 let chunks = self.chunks.load(Relaxed);
+                let phases = self.phases.load(Relaxed);
                 fence(Acquire);
                 if self.seq.load(Relaxed) != s {
                     // Rewritten meanwhile: that pass is over, the next one is coming.
@@ -295,7 +346,7 @@ impl Shared {
                 let f = unsafe {
                     std::mem::transmute::<[usize; 2], *const (dyn Fn(usize) + Sync)>(job)
                 };
-                self.work(me, seen, chunks, f);
+                self.work(me, seen, (chunks, phases), f);
                 idle_since = Instant::now();
                 spins = 0;
                 continue;
@@ -364,6 +415,7 @@ impl Team {
             seq: AtomicU64::new(0),
             job: [AtomicUsize::new(0), AtomicUsize::new(0)],
             chunks: AtomicUsize::new(0),
+            phases: AtomicUsize::new(1),
             parked: AtomicUsize::new(0),
             stop: AtomicBool::new(false),
             helpers: OnceLock::new(),
@@ -441,15 +493,24 @@ impl std::fmt::Debug for Team {
 /// is no team to share them with, or more than 65,535 chunks (a body of 67 million particles
 /// in the spring kernel's chunks).
 pub(crate) fn share(chunks: usize, job: &(dyn Fn(usize) + Sync)) -> bool {
+    share_in(chunks, 1, job)
+}
+
+/// [`share`] of a pass in two phases (`phases` 2) or one: `job(c)` and `job(chunks + c)` for
+/// every chunk `c`, each thread running the first phases of its share's chunks before their
+/// second phases (see [`job_at`]), so that a second phase may wait for the first phases of
+/// chunks before it (their own or another share's) and the pass still ends. Returns false
+/// (having run nothing) as [`share`] does.
+pub(crate) fn share_in(chunks: usize, phases: usize, job: &(dyn Fn(usize) + Sync)) -> bool {
     let shared = CURRENT.with(|c| c.get());
-    if shared.is_null() || chunks as u64 > COUNT_MASK {
+    if shared.is_null() || (phases * chunks) as u64 > COUNT_MASK {
         return false;
     }
     // Inside the pass this thread runs chunks too; a kernel a chunk calls runs on this thread.
     let _restore = Restore(CURRENT.with(|c| c.replace(std::ptr::null())));
     // SAFETY: `CURRENT` is set only within `Team::run`, which borrows the team (and so its
     // `Arc<Shared>`) for as long as it is set.
-    unsafe { &*shared }.run(chunks, job);
+    unsafe { &*shared }.run(chunks, phases, job);
     true
 }
 

@@ -9,9 +9,13 @@
 //! elements' forces in a fixed order (the elements' as given). Both passes are cut into the
 //! same chunks of consecutive particles, of about [`CHUNK_PARTICLES`] each and as nearly the
 //! same work as the particles allow (see `borders`), an element going with the chunk of
-//! its lowest vertex (but at the chunks' edges): no two threads write the same memory, the
-//! order of every sum is independent of the thread count, and a thread gathers mostly the
-//! slots its own element pass wrote.
+//! its lowest vertex (but for the last few of a chunk's, which go with the chunk before, so
+//! that its groups of lanes are whole): no two threads write the same memory, the order of
+//! every sum is independent of the thread count, and a thread gathers mostly the slots its own
+//! element pass wrote. No chunk's elements read a particle before the chunk's first, so in a
+//! symplectic Euler step the two passes are one pass of the team
+//! (`force_gather_set_then`), each chunk's gather waiting only for the element chunks
+//! that reach its particles.
 //!
 //! Where the processor has AVX, the element pass takes eight elements at a time (four in the
 //! f64 build) from a copy of their data laid out by lanes (`Lanes`): the same operations as
@@ -21,7 +25,7 @@
 //!
 //! [`Tets::accumulate_f64`]: crate::core::fem::Tets::accumulate_f64
 
-use super::{ChunkLists, SharedMut, for_each_chunk};
+use super::{ChunkLists, PhaseFlags, SharedMut, for_each_chunk};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
@@ -93,6 +97,13 @@ fn borders(start: &[u32], below: &[u32]) -> Vec<u32> {
     b
 }
 
+/// The address particle 0 would have in `x`, which holds the particles from `from` on: with
+/// a particle's index added, its address (only ever those within `x`).
+#[inline(always)]
+fn based(x: &[Vector], from: usize) -> *const Vector {
+    x.as_ptr().wrapping_sub(from)
+}
+
 #[derive(Clone, Copy, Debug)]
 struct Element {
     v: [u32; 4],
@@ -141,6 +152,13 @@ pub struct TetForces {
     reach: ChunkLists,
     /// Each chunk's part of a sum over the elements ([`Self::energy`]).
     partials: Mutex<Vec<f64>>,
+    /// The marks of the fused pass's force chunks (`force_gather_set_then`).
+    flags: PhaseFlags,
+    /// For each chunk: one past the highest particle its elements read ([`Self::reads`]),
+    /// and the first chunk whose elements read any of its particles (its gather waits for
+    /// that chunk's force pass and those after it, up to its own).
+    reads_end: Vec<u32>,
+    first_reader: Vec<u32>,
 }
 
 impl TetForces {
@@ -198,19 +216,20 @@ impl TetForces {
         }
         let elements: Vec<Element> = order.iter().map(|&k| given[k]).collect();
         let borders = borders(&start, &below);
-        // Chunk `c`'s elements: those whose lowest vertex it holds, the border moved to the
-        // nearest whole group of lanes (so that the lanes take every element but the last
-        // few); which chunk evaluates an element changes no bits.
+        // Chunk `c`'s elements: those whose lowest vertex it holds, the border moved up to
+        // the next whole group of lanes (so that the lanes take every element but the last
+        // few); which chunk evaluates an element changes no bits. Up, never down: a chunk's
+        // elements then read no particle before its own (the fused pass's gathers wait only
+        // for force chunks before them).
         let group = ELEMENT_GROUP;
         let element_start: Vec<u32> = borders
             .iter()
             .map(|&b| {
                 let e = below[b as usize] as usize;
-                let rounded = (e + group / 2) / group * group;
                 (if b as usize == bound {
                     e
                 } else {
-                    rounded.min(elements.len())
+                    e.next_multiple_of(group).min(elements.len())
                 }) as u32
             })
             .collect();
@@ -227,6 +246,23 @@ impl TetForces {
         };
         let border = ChunkLists::new(crossing().map(|(_, p)| (chunk_of(p), p)));
         let reach = ChunkLists::new(crossing());
+        let reads_end: Vec<u32> = (0..chunks)
+            .map(|c| {
+                let (e0, e1) = (element_start[c] as usize, element_start[c + 1] as usize);
+                (elements[e0..e1].iter().flat_map(|e| e.v))
+                    .map(|p| p + 1)
+                    .fold(borders[c], u32::max)
+            })
+            .collect();
+        let mut first_reader: Vec<u32> = (0..chunks as u32).collect();
+        for (c, &end) in reads_end.iter().enumerate() {
+            for d in c + 1..chunks {
+                if borders[d] >= end {
+                    break;
+                }
+                first_reader[d] = first_reader[d].min(c as u32);
+            }
+        }
         #[cfg(target_arch = "x86_64")]
         let lanes = elements
             .chunks_exact(lane::W)
@@ -250,6 +286,9 @@ impl TetForces {
             element_start,
             border,
             reach,
+            flags: PhaseFlags::new(chunks),
+            reads_end,
+            first_reader,
         }
     }
 
@@ -273,7 +312,7 @@ impl TetForces {
             let mut sum = 0.0;
             for e in &self.elements[r] {
                 // SAFETY: the caller guarantees the indices.
-                let [fa, fb, fc] = unsafe { deformation(e, x) };
+                let [fa, fb, fc] = unsafe { deformation(e, x, 0) };
                 let j = fa.dot(fb.cross(fc));
                 let i1 = fa.dot(fa) + fb.dot(fb) + fc.dot(fc);
                 let r = inv_cbrt(j.max(J_MIN as Scalar));
@@ -316,10 +355,34 @@ impl TetForces {
         finish: super::Finish<'_>,
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
-        // SAFETY: as the caller guarantees.
+        let buf = SharedMut(guard.as_mut_ptr());
+        #[cfg(target_arch = "x86_64")]
+        let avx = std::arch::is_x86_feature_detected!("avx");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx = false;
+        let force = |c: usize, r: super::Reads<'_>| {
+            // SAFETY: the chunk's reads (see `force_gather_set_then`); it writes only its own
+            // elements' slots.
+            unsafe { self.force_chunk(c, (r.x, r.from), buf, avx) }
+        };
+        let reads = |c: usize| self.reads(c);
+        let after = |c: usize| self.first_reader[c] as usize;
+        // SAFETY: as the caller guarantees; `force` and `reads` as `force_gather_set_then`
+        // asks (see `springs`' `set_then` on the slots the gathers read).
         unsafe {
-            self.force_pass(x, &mut guard);
-            super::gather_set_then(self, &guard, x, v, f, finish);
+            let guard: &[Vector] = &guard;
+            super::force_gather_set_then(
+                self,
+                &self.flags,
+                force,
+                reads,
+                after,
+                guard,
+                x,
+                v,
+                f,
+                finish,
+            );
         }
     }
 
@@ -331,39 +394,66 @@ impl TetForces {
         let buf = SharedMut(buf.as_mut_ptr());
         #[cfg(target_arch = "x86_64")]
         let avx = std::arch::is_x86_feature_detected!("avx");
+        #[cfg(not(target_arch = "x86_64"))]
+        let avx = false;
         for_each_chunk(self.chunks(), |c| {
-            // What the chunk's elements read of other chunks, perhaps written last by another
-            // thread's sweep: asked for now, in flight together (see the springs' pass).
-            super::prefetch(x, self.reach.of(c));
-            let (e0, e1) = (
-                self.element_start[c] as usize,
-                self.element_start[c + 1] as usize,
-            );
-            // The lanes take whole groups of `W` elements from the layout's start: the
-            // elements before the chunk's first whole group, and after its last, one by one.
-            #[allow(unused_mut)]
-            let (mut head, mut tail) = (e0..e1, e1..e1);
-            #[cfg(target_arch = "x86_64")]
-            if avx {
-                let first = e0.next_multiple_of(lane::W).min(e1);
-                head = e0..first;
-                // SAFETY: AVX is present; `first` is a multiple of `W` (or `e1`); as below.
-                tail = unsafe { self.elements_avx(first..e1, x, buf.ptr()) }..e1;
-            }
-            for range in [head, tail] {
-                for (e, t) in self.elements[range.clone()].iter().zip(range) {
-                    // SAFETY: particle indices are below the bound the caller guarantees;
-                    // element `t` writes only its own four slots.
-                    unsafe {
-                        let out = element_forces(e, x);
-                        let b = buf.ptr().add(4 * t);
-                        for (a, fa) in out.into_iter().enumerate() {
-                            *b.add(a) = fa;
-                        }
+            // SAFETY: as the caller guarantees; a chunk writes only its elements' slots.
+            unsafe { self.force_chunk(c, (x, 0), buf, avx) }
+        });
+    }
+
+    /// Chunk `c`'s elements: each one's forces on its four particles into its slots of `buf`.
+    /// `x` holds the particles from `from` on (at least what the chunk reads:
+    /// [`Self::reads`]).
+    ///
+    /// # Safety
+    /// `x` holds the chunk's reads; `buf` has four slots per element, and nothing else writes
+    /// the chunk's meanwhile; `avx` only where the processor has AVX.
+    unsafe fn force_chunk(
+        &self,
+        c: usize,
+        (x, from): (&[Vector], usize),
+        buf: SharedMut<Vector>,
+        avx: bool,
+    ) {
+        let _ = avx;
+        // What the chunk's elements read of other chunks, perhaps written last by another
+        // thread's sweep: asked for now, in flight together (see the springs' pass).
+        super::prefetch(x, self.reach.of(c), from);
+        let (e0, e1) = (
+            self.element_start[c] as usize,
+            self.element_start[c + 1] as usize,
+        );
+        // The lanes take whole groups of `W` elements from the layout's start: the
+        // elements before the chunk's first whole group, and after its last, one by one.
+        #[allow(unused_mut)]
+        let (mut head, mut tail) = (e0..e1, e1..e1);
+        #[cfg(target_arch = "x86_64")]
+        if avx {
+            let first = e0.next_multiple_of(lane::W).min(e1);
+            head = e0..first;
+            // SAFETY: AVX is present; `first` is a multiple of `W` (or `e1`); as below.
+            tail = unsafe { self.elements_avx(first..e1, (x, from), buf.ptr()) }..e1;
+        }
+        for range in [head, tail] {
+            for (e, t) in self.elements[range.clone()].iter().zip(range) {
+                // SAFETY: the element's particles are in `x`, as the caller guarantees;
+                // element `t` writes only its own four slots.
+                unsafe {
+                    let out = element_forces(e, x, from);
+                    let b = buf.ptr().add(4 * t);
+                    for (a, fa) in out.into_iter().enumerate() {
+                        *b.add(a) = fa;
                     }
                 }
             }
-        });
+        }
+    }
+
+    /// The particles chunk `c`'s elements read: from the chunk's first (no element of the
+    /// chunk has its lowest vertex before it) to their highest vertex.
+    fn reads(&self, c: usize) -> std::ops::Range<usize> {
+        self.borders[c] as usize..self.reads_end[c] as usize
     }
 }
 
@@ -439,17 +529,18 @@ impl TetForces {
     unsafe fn elements_avx(
         &self,
         range: std::ops::Range<usize>,
-        x: &[Vector],
+        (x, from): (&[Vector], usize),
         buf: *mut Vector,
     ) -> usize {
         use lane::*;
+        let xb = based(x, from);
         let mut t = range.start;
         while t + W <= range.end {
             // SAFETY: `t + W ≤ m`, so block `t / W` is whole; particle indices are below the
             // bound the caller guarantees; `buf` has the slots; AVX is present.
             unsafe {
                 let l = self.lanes.get_unchecked(t / W);
-                let p = |a: usize| V(positions(x, &l.v[a]));
+                let p = |a: usize| V(positions(xb, &l.v[a]));
                 let x0 = p(0);
                 let (e1, e2, e3) = (p(1).sub(x0), p(2).sub(x0), p(3).sub(x0));
                 let g: [L; 9] = std::array::from_fn(|i| load(&l.g[i]));
@@ -651,13 +742,14 @@ mod lane {
         };
     }
 
-    /// The x, y, z columns of the particles `idx`.
+    /// The x, y, z columns of the particles `idx`, from `x`, particle 0's address (see
+    /// `based`).
     ///
     /// # Safety
-    /// Every index is in `x`.
+    /// Every index addresses a particle of the slice `x` was made from.
     #[inline(always)]
-    pub unsafe fn positions(x: &[Vector], idx: &[u32; W]) -> [L; 3] {
-        let p = |q: usize| unsafe { *x.get_unchecked(idx[q] as usize) };
+    pub unsafe fn positions(x: *const Vector, idx: &[u32; W]) -> [L; 3] {
+        let p = |q: usize| unsafe { *x.add(idx[q] as usize) };
         #[cfg(not(feature = "f64"))]
         {
             // `Vec3A` is one `__m128`: transpose eight of them.
@@ -705,9 +797,9 @@ mod lane {
 /// # Safety
 /// The element's particles are in `x`.
 #[inline(always)]
-unsafe fn element_forces(e: &Element, x: &[Vector]) -> [Vector; 4] {
+unsafe fn element_forces(e: &Element, x: &[Vector], from: usize) -> [Vector; 4] {
     // SAFETY: the caller guarantees the indices.
-    let [fa, fb, fc] = unsafe { deformation(e, x) };
+    let [fa, fb, fc] = unsafe { deformation(e, x, from) };
     let [g1, g2, g3] = e.g;
     // cof F = J F⁻ᵀ, finite for flat and inverted elements.
     let (ca, cb, cc) = (fb.cross(fc), fc.cross(fa), fa.cross(fb));
@@ -740,9 +832,10 @@ unsafe fn element_forces(e: &Element, x: &[Vector]) -> [Vector; 4] {
 /// # Safety
 /// The element's particles are in `x`.
 #[inline(always)]
-unsafe fn deformation(e: &Element, x: &[Vector]) -> [Vector; 3] {
+unsafe fn deformation(e: &Element, x: &[Vector], from: usize) -> [Vector; 3] {
+    let x = based(x, from);
     // SAFETY: the caller guarantees the indices.
-    let p = |a: usize| unsafe { *x.get_unchecked(e.v[a] as usize) };
+    let p = |a: usize| unsafe { *x.add(e.v[a] as usize) };
     let x0 = p(0);
     let (e1, e2, e3) = (p(1) - x0, p(2) - x0, p(3) - x0);
     let [g1, g2, g3] = e.g;
@@ -797,6 +890,9 @@ impl Clone for TetForces {
             border: self.border.clone(),
             reach: self.reach.clone(),
             partials: Mutex::new(vec![0.0; self.chunks()]),
+            flags: self.flags.clone(),
+            reads_end: self.reads_end.clone(),
+            first_reader: self.first_reader.clone(),
         }
     }
 }
@@ -878,14 +974,30 @@ mod layout_tests {
                     }
                     let (e0, e1) = (t.element_start[c] as usize, t.element_start[c + 1] as usize);
                     for (k, e) in t.elements[e0..e1].iter().enumerate() {
-                        let low = *e.v.iter().min().unwrap();
-                        let from_edge = k.min(e1 - e0 - 1 - k);
+                        let low = *e.v.iter().min().unwrap() as usize;
+                        // None before the chunk; past it, only among its last group.
                         assert!(
-                            r.contains(&(low as usize)) || from_edge < ELEMENT_GROUP / 2,
+                            r.contains(&low) || (low >= r.end && e1 - e0 - 1 - k < ELEMENT_GROUP),
                             "chunk {c}: element {} of lowest vertex {low} outside {r:?}",
                             e0 + k
                         );
                     }
+                }
+                // What each chunk's elements read, and the first chunk whose elements read
+                // each chunk's particles, counted directly.
+                let end: Vec<usize> = (0..count)
+                    .map(|c| {
+                        let (e0, e1) =
+                            (t.element_start[c] as usize, t.element_start[c + 1] as usize);
+                        (t.elements[e0..e1].iter().flat_map(|e| e.v))
+                            .map(|p| p as usize + 1)
+                            .fold(t.borders[c] as usize, usize::max)
+                    })
+                    .collect();
+                for c in 0..count {
+                    assert_eq!(t.reads(c), t.range(c).start..end[c], "chunk {c}");
+                    let want = (0..=c).find(|&d| end[d] > t.range(c).start).unwrap();
+                    assert_eq!(t.first_reader[c] as usize, want, "chunk {c}");
                 }
                 let total: u64 = work.iter().sum();
                 let mean = total as f64 / count as f64;
@@ -959,12 +1071,12 @@ mod tests {
         let forces = TetForces::layout(elements);
         let mut buf = vec![Vector::splat(Scalar::NAN); 4 * m];
         // SAFETY: AVX is present; `x` holds every particle; `buf` four slots per element.
-        let rest = unsafe { forces.elements_avx(0..m, &x, buf.as_mut_ptr()) };
+        let rest = unsafe { forces.elements_avx(0..m, (&x, 0), buf.as_mut_ptr()) };
         assert_eq!(rest, m - m % lane::W);
         let mut signs = [0; 3];
         for (t, e) in forces.elements.iter().enumerate().take(rest) {
             // SAFETY: as above.
-            let want = unsafe { element_forces(e, &x) };
+            let want = unsafe { element_forces(e, &x, 0) };
             for a in 0..4 {
                 let got = buf[4 * t + a];
                 assert_eq!(
