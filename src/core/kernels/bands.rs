@@ -248,16 +248,18 @@ impl Bands {
     }
 
     /// Adds the bands' forces on the chunk's particles `p0..p1` into `out[p − p0]`, after
-    /// the row kernel's sums.
+    /// the row kernel's sums (or sets them to the sums, with `set`).
     ///
     /// # Safety
-    /// `g` is the force pass's columns (every chunk's done); `scratch` is the chunk's own;
-    /// `out` points to at least `p1 − p0` vectors; `p1 ≤` the bound.
+    /// `g` points to the force pass's columns, the entries of the springs reaching
+    /// `p0..p1` written and not being written (other entries may be: they are read through
+    /// the pointer, never as a slice of the whole); `scratch` is the chunk's own; `out`
+    /// points to at least `p1 − p0` vectors; `p1 ≤` the bound.
     pub(crate) unsafe fn gather(
         &self,
         p0: usize,
         p1: usize,
-        g: &[Scalar],
+        g: *const Scalar,
         scratch: *mut Scalar,
         (out, set): (*mut Vector, bool),
     ) {
@@ -293,7 +295,7 @@ impl Bands {
         &self,
         p0: usize,
         p1: usize,
-        g: &[Scalar],
+        g: *const Scalar,
         (out, set): (*mut Vector, bool),
     ) {
         #[cfg(feature = "f64")]
@@ -307,7 +309,6 @@ impl Bands {
             _mm256_sub_ps as sub,
         };
         let c = self.columns;
-        let g = g.as_ptr();
         for t in (p0..p1).step_by(LANES) {
             let mut s = [zero(); 3];
             for b in &self.band {
@@ -333,7 +334,7 @@ impl Bands {
         &self,
         p0: usize,
         p1: usize,
-        g: &[Scalar],
+        g: *const Scalar,
         scratch: *mut Scalar,
         (out, set): (*mut Vector, bool),
     ) {
@@ -358,7 +359,10 @@ impl Bands {
             }
             let (from, len) = (b.g + q0 - b.a, q1 - q0);
             for (c, s) in [&mut *sx, &mut *sy, &mut *sz].into_iter().enumerate() {
-                let col = &g[c * self.columns + from..c * self.columns + from + len + b.o];
+                // SAFETY: the band's entries of particles `q0 − o..q1`, within its column.
+                let col = unsafe {
+                    std::slice::from_raw_parts(g.add(c * self.columns + from), len + b.o)
+                };
                 add_band(&mut s[q0 - p0..q1 - p0], &col[b.o..], &col[..len]);
             }
         }
@@ -825,9 +829,9 @@ mod tests {
             let s = scratch.as_mut_ptr();
             // SAFETY: the scratch and outputs are the chunk's (all `n` particles).
             unsafe {
-                bands.gather(0, n, &g, s, (fast.as_mut_ptr(), set));
-                bands.gather_columns(0, n, &g, s, (plain.as_mut_ptr(), set));
-                bands.gather_columns(0, n, &g, s, (set_plain.as_mut_ptr(), false));
+                bands.gather(0, n, g.as_ptr(), s, (fast.as_mut_ptr(), set));
+                bands.gather_columns(0, n, g.as_ptr(), s, (plain.as_mut_ptr(), set));
+                bands.gather_columns(0, n, g.as_ptr(), s, (set_plain.as_mut_ptr(), false));
             }
             assert_eq!(bits(&fast), bits(&plain), "set {set}");
             assert_eq!(bits(&fast), bits(&set_plain), "set {set}");

@@ -421,14 +421,18 @@ pub(crate) trait Gather: Sync {
     /// Particles `p0..p1` sum their slots into `out[p − p0]`: added to it, or set when `set`
     /// (as `0 + sum`, the bits of adding to a zeroed force).
     ///
+    /// The slots are read through a pointer, each where it lies: while one chunk gathers,
+    /// another thread's force chunks may be writing other slots of the same buffer (see
+    /// [`force_gather_set_then`]), which a slice over the buffer would not allow.
+    ///
     /// # Safety
-    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors; `buf` is the force
-    /// pass's.
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors; `buf` points to the force
+    /// pass's slots, those the chunk reads written and not being written.
     unsafe fn gather_chunk(
         &self,
         p0: usize,
         p1: usize,
-        buf: &[Self::Slot],
+        buf: *const Self::Slot,
         out: *mut Vector,
         set: bool,
     );
@@ -438,13 +442,17 @@ pub(crate) trait Gather: Sync {
 ///
 /// # Safety
 /// `f` holds the kernel's particles; `buf` is its force pass's.
-pub(crate) unsafe fn gather_add<K: Gather>(kernel: &K, buf: &[K::Slot], f: &mut [Vector]) {
+pub(crate) unsafe fn gather_add<K: Gather>(
+    kernel: &K,
+    buf: SharedConst<K::Slot>,
+    f: &mut [Vector],
+) {
     assert!(f.len() >= kernel.bound(), "forces past the array");
     let fp = SharedMut(f.as_mut_ptr());
     for_each_chunk(kernel.chunks(), |c| {
         let r = kernel.range(c);
         // SAFETY: particles below the bound; each chunk writes its own particles only.
-        unsafe { kernel.gather_chunk(r.start, r.end, buf, fp.ptr().add(r.start), false) }
+        unsafe { kernel.gather_chunk(r.start, r.end, buf.ptr(), fp.ptr().add(r.start), false) }
     });
 }
 
@@ -492,16 +500,17 @@ fn chunks_over<K: Gather>(
 /// Which memory a job touches: a force chunk reads its `reads` of `x` and `v` (which no
 /// gather writes meanwhile: those of the chunks it reaches wait for it) and writes its own
 /// slots; a gather reads the slots of the force chunks it waited for and writes its own
-/// particles. The gathers see the slots through `buf`, a shared slice over the whole buffer
-/// while other threads' force chunks may still write other slots in it: no slot is read and
-/// written at once, but the slice covers slots being written (the gather kernels address the
-/// buffer by slot index), which Stacked Borrows, unlike Tree Borrows, does not allow.
+/// particles. No slot is read and written at once, and no reference covers memory another
+/// thread writes meanwhile: the force chunks read the positions and velocities through slices
+/// of their reads alone, and the gathers read the slots (which other threads' force chunks
+/// may still be writing elsewhere in the buffer) through a pointer, each where it lies.
 ///
 /// # Safety
 /// `force(c, _)` writes only chunk `c`'s slots and reads nothing of `x` and `v` but
 /// `reads(c)`, which starts at or after chunk `c`'s first particle and ends at or before the
 /// bound; every chunk `d > c` with particles in `reads(c)` has `first_reader(d) ≤ c`, and
-/// `first_reader(d) ≤ d`; `buf` holds the slots the force chunks write (the gathers read it).
+/// `first_reader(d) ≤ d`; `buf` points to the slots the force chunks write (the gathers read
+/// them).
 ///
 /// # Panics
 /// If `x`, `v` and `f` differ in length.
@@ -512,7 +521,7 @@ pub(crate) unsafe fn force_gather_set_then<K: Gather>(
     force: impl Fn(usize, Reads) + Sync + Send,
     reads: impl Fn(usize) -> std::ops::Range<usize> + Sync + Send,
     first_reader: impl Fn(usize) -> usize + Sync + Send,
-    buf: &[K::Slot],
+    buf: SharedConst<K::Slot>,
     x: &mut [Vector],
     v: &mut [Vector],
     f: &mut [Vector],
@@ -594,7 +603,7 @@ impl Reads<'_> {
 /// `buf` is the kernel's force pass's.
 unsafe fn gather_set_chunk<K: Gather>(
     kernel: &K,
-    buf: &[K::Slot],
+    buf: SharedConst<K::Slot>,
     (xp, vp, fp): (SharedMut<Vector>, SharedMut<Vector>, SharedMut<Vector>),
     c: usize,
     r: std::ops::Range<usize>,
@@ -614,7 +623,7 @@ unsafe fn gather_set_chunk<K: Gather>(
     let end = r.end.min(kernel.bound()).max(r.start);
     if end > r.start {
         // SAFETY: particles below the bound; `f` is the chunk's `r.len()` forces.
-        unsafe { kernel.gather_chunk(r.start, end, buf, f.as_mut_ptr(), true) };
+        unsafe { kernel.gather_chunk(r.start, end, buf.ptr(), f.as_mut_ptr(), true) };
     }
     f[end - r.start..].fill(Vector::ZERO);
     finish(Chunk { range: r, x, v, f });
@@ -677,6 +686,27 @@ impl<T> SharedMut<T> {
 unsafe impl<T: Send> Send for SharedMut<T> {}
 // SAFETY: as above.
 unsafe impl<T: Send> Sync for SharedMut<T> {}
+
+/// A raw pointer to read from on several threads: each reads only elements nothing writes
+/// meanwhile (a gather's slots, once the force chunks that write them are done).
+pub(crate) struct SharedConst<T>(pub *const T);
+impl<T> Clone for SharedConst<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SharedConst<T> {}
+impl<T> SharedConst<T> {
+    /// The pointer (a method, so closures capture the whole `Sync` wrapper).
+    #[inline(always)]
+    pub(crate) fn ptr(self) -> *const T {
+        self.0
+    }
+}
+// SAFETY: as `SharedMut`: the jobs read only elements no other job writes at the time.
+unsafe impl<T: Sync> Send for SharedConst<T> {}
+// SAFETY: as above.
+unsafe impl<T: Sync> Sync for SharedConst<T> {}
 
 #[cfg(test)]
 mod tests {

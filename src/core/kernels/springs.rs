@@ -34,7 +34,7 @@
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
 use super::bands::{Bands, LINE};
-use super::{ChunkLists, PhaseFlags, SharedMut};
+use super::{ChunkLists, PhaseFlags, SharedConst, SharedMut};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
@@ -165,6 +165,15 @@ impl BandBuf {
             &mut v[skip..skip + n]
         }
         (from_line(&mut self.columns), from_line(&mut self.scratch))
+    }
+
+    /// [`Self::lines`] as pointers, taken once for a step's force chunks and gathers alike.
+    fn pointers(&mut self) -> (SharedMut<Scalar>, SharedMut<Scalar>) {
+        let (columns, scratch) = self.lines();
+        (
+            SharedMut(columns.as_mut_ptr()),
+            SharedMut(scratch.as_mut_ptr()),
+        )
     }
 }
 
@@ -321,25 +330,31 @@ impl SpringRows {
     pub(crate) unsafe fn accumulate(&self, x: &[Vector], v: Option<&[Vector]>, f: &mut [Vector]) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         let mut bands = self.band_buf.lock().unwrap_or_else(|e| e.into_inner());
+        let buf = SharedMut(guard.as_mut_ptr());
+        let lines = BandBuf::pointers(&mut bands);
+        let slots = SharedConst(buf.ptr() as *const Slot);
         // SAFETY: as the caller guarantees.
         unsafe {
-            self.force_pass(x, v, &mut guard, &mut bands);
-            match self.with_bands(&mut bands) {
-                Some(w) => super::gather_add(&w, &guard, f),
-                None => super::gather_add(self, &guard, f),
+            self.force_pass(x, v, buf, lines);
+            match self.with_bands(lines) {
+                Some(w) => super::gather_add(&w, slots, f),
+                None => super::gather_add(self, slots, f),
             }
         }
     }
 
-    /// The gather of the rows and the bands together, when there are bands.
-    fn with_bands<'a>(&'a self, buf: &'a mut BandBuf) -> Option<WithBands<'a>> {
+    /// The gather of the rows and the bands together, when there are bands (the band
+    /// buffers' columns and scratch as [`BandBuf::pointers`] gives them).
+    fn with_bands(
+        &self,
+        (columns, scratch): (SharedMut<Scalar>, SharedMut<Scalar>),
+    ) -> Option<WithBands<'_>> {
         let bands = self.bands.as_ref()?;
-        let (columns, scratch) = buf.lines();
         Some(WithBands {
             rows: self,
             bands,
-            columns,
-            scratch: SharedMut(scratch.as_mut_ptr()),
+            columns: SharedConst(columns.ptr() as *const Scalar),
+            scratch,
         })
     }
 
@@ -360,11 +375,8 @@ impl SpringRows {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         let mut bands = self.band_buf.lock().unwrap_or_else(|e| e.into_inner());
         let buf = SharedMut(guard.as_mut_ptr());
-        let (columns, scratch) = bands.lines();
-        let lines = (
-            SharedMut(columns.as_mut_ptr()),
-            SharedMut(scratch.as_mut_ptr()),
-        );
+        let lines = BandBuf::pointers(&mut bands);
+        let slots = SharedConst(buf.ptr() as *const Slot);
         let lanes = lanes();
         let force = |c: usize, r: super::Reads<'_>| {
             // SAFETY: the chunk's reads (see `force_gather_set_then`); it writes only its own
@@ -374,20 +386,19 @@ impl SpringRows {
         let reads = |c: usize| self.reads(c);
         let after = |c: usize| self.first_reader[c] as usize;
         // SAFETY: as the caller guarantees; `force` and `reads` as `force_gather_set_then`
-        // asks. The gathers take the slots and columns as shared slices while force chunks
-        // write other entries of them: no entry a gather reads is written while it runs (it
-        // waits for every force chunk that writes one), and no entry a force chunk writes is
-        // read meanwhile.
+        // asks, and `slots` the slots `force` writes. The gathers read the slots and the band
+        // columns through pointers, each entry where it lies: no entry a gather reads is
+        // written while it runs (it waits for every force chunk that writes one), and no entry
+        // a force chunk writes is read meanwhile.
         unsafe {
-            let guard: &[Slot] = &guard;
-            match self.with_bands(&mut bands) {
+            match self.with_bands(lines) {
                 Some(w) => super::force_gather_set_then(
                     &w,
                     &self.flags,
                     force,
                     reads,
                     after,
-                    guard,
+                    slots,
                     x,
                     v,
                     f,
@@ -399,7 +410,7 @@ impl SpringRows {
                     force,
                     reads,
                     after,
-                    guard,
+                    slots,
                     x,
                     v,
                     f,
@@ -455,15 +466,9 @@ impl SpringRows {
         &self,
         x: &[Vector],
         v: Option<&[Vector]>,
-        buf: &mut [Slot],
-        bands: &mut BandBuf,
+        buf: SharedMut<Slot>,
+        (columns, scratch): (SharedMut<Scalar>, SharedMut<Scalar>),
     ) {
-        let buf = SharedMut(buf.as_mut_ptr());
-        let (columns, scratch) = bands.lines();
-        let (columns, scratch) = (
-            SharedMut(columns.as_mut_ptr()),
-            SharedMut(scratch.as_mut_ptr()),
-        );
         let lanes = lanes();
         super::for_each_chunk(self.chunks(), |c| {
             // SAFETY: as the caller guarantees; a chunk writes only its own springs' slots and
@@ -552,9 +557,10 @@ impl SpringRows {
     /// `out[p − p0]` as [`super::Gather::gather_chunk`] says.
     ///
     /// # Safety
-    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors.
+    /// `p1 ≤` the bound; `out` points to at least `p1 − p0` vectors; `buf` as
+    /// [`super::Gather::gather_chunk`] says.
     #[inline(always)]
-    unsafe fn gather(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+    unsafe fn gather(&self, p0: usize, p1: usize, buf: *const Slot, out: *mut Vector, set: bool) {
         for p in p0..p1 {
             // SAFETY: `p` is below the bound; the layout's slots are below the number of
             // springs.
@@ -570,7 +576,7 @@ impl SpringRows {
                 // loop): half the loop branches, and a loop body the processor's front end
                 // takes whole wherever the code lands (one loop a term ran the bench cloth's
                 // step in 53 µs in one build and 61–64 in others, by where its branches fell).
-                let slot = |s: usize| buf.get_unchecked(s).get();
+                let slot = |s: usize| (*buf.add(s)).get();
                 let mut plus = Vector::ZERO;
                 let mut k = row.start;
                 while k + 2 <= row.end {
@@ -760,7 +766,14 @@ impl super::Gather for SpringRows {
 
     /// In registers where the build has a faster form.
     #[inline(always)]
-    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+    unsafe fn gather_chunk(
+        &self,
+        p0: usize,
+        p1: usize,
+        buf: *const Slot,
+        out: *mut Vector,
+        set: bool,
+    ) {
         // SAFETY: as the caller guarantees.
         unsafe {
             #[cfg(all(target_arch = "x86_64", feature = "f64"))]
@@ -869,7 +882,14 @@ impl SpringRows {
     /// # Safety
     /// As for [`Self::gather`].
     #[target_feature(enable = "avx")]
-    unsafe fn gather_avx(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+    unsafe fn gather_avx(
+        &self,
+        p0: usize,
+        p1: usize,
+        buf: *const Slot,
+        out: *mut Vector,
+        set: bool,
+    ) {
         use std::arch::x86_64::*;
         for p in p0..p1 {
             // SAFETY: as for `gather`; slots are 32-byte aligned.
@@ -882,13 +902,13 @@ impl SpringRows {
                     continue;
                 }
                 let mut plus = _mm256_setzero_pd();
-                for f in buf.get_unchecked(row) {
-                    plus = _mm256_add_pd(plus, _mm256_load_pd(f.0.as_ptr()));
+                for s in row {
+                    plus = _mm256_add_pd(plus, _mm256_load_pd(buf.add(s) as *const f64));
                 }
                 let mut minus = _mm256_setzero_pd();
                 for &s in up {
-                    let f = buf.get_unchecked(s as usize);
-                    minus = _mm256_add_pd(minus, _mm256_load_pd(f.0.as_ptr()));
+                    let f = buf.add(s as usize) as *const f64;
+                    minus = _mm256_add_pd(minus, _mm256_load_pd(f));
                 }
                 let mut r = [0.0f64; 4];
                 _mm256_storeu_pd(r.as_mut_ptr(), _mm256_sub_pd(plus, minus));
@@ -903,7 +923,7 @@ impl SpringRows {
 struct WithBands<'a> {
     rows: &'a SpringRows,
     bands: &'a Bands,
-    columns: &'a [Scalar],
+    columns: SharedConst<Scalar>,
     scratch: SharedMut<Scalar>,
 }
 
@@ -927,7 +947,14 @@ impl super::Gather for WithBands<'_> {
     }
 
     #[inline(always)]
-    unsafe fn gather_chunk(&self, p0: usize, p1: usize, buf: &[Slot], out: *mut Vector, set: bool) {
+    unsafe fn gather_chunk(
+        &self,
+        p0: usize,
+        p1: usize,
+        buf: *const Slot,
+        out: *mut Vector,
+        set: bool,
+    ) {
         // SAFETY: as the caller guarantees; `p0` starts a chunk (the gathers hand over whole
         // chunks), whose scratch this is.
         unsafe {
@@ -939,7 +966,8 @@ impl super::Gather for WithBands<'_> {
             }
             let at = p0 / self.rows.chunk * self.bands.scratch_len();
             let out = (out, set && !rows);
-            (self.bands).gather(p0, p1, self.columns, self.scratch.ptr().add(at), out);
+            let columns = self.columns.ptr();
+            (self.bands).gather(p0, p1, columns, self.scratch.ptr().add(at), out);
         }
     }
 }

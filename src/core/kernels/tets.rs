@@ -25,7 +25,7 @@
 //!
 //! [`Tets::accumulate_f64`]: crate::core::fem::Tets::accumulate_f64
 
-use super::{ChunkLists, PhaseFlags, SharedMut, for_each_chunk};
+use super::{ChunkLists, PhaseFlags, SharedConst, SharedMut, for_each_chunk};
 use crate::core::fem::PackedTet;
 use crate::core::fem::element::J_MIN;
 use crate::math::{Scalar, ToScalar, Vector};
@@ -337,7 +337,7 @@ impl TetForces {
         // SAFETY: as the caller guarantees.
         unsafe {
             self.force_pass(x, &mut guard);
-            super::gather_add(self, &guard, f);
+            super::gather_add(self, SharedConst(guard.as_ptr()), f);
         }
     }
 
@@ -368,16 +368,15 @@ impl TetForces {
         let reads = |c: usize| self.reads(c);
         let after = |c: usize| self.first_reader[c] as usize;
         // SAFETY: as the caller guarantees; `force` and `reads` as `force_gather_set_then`
-        // asks (see `springs`' `set_then` on the slots the gathers read).
+        // asks, and `buf` the slots `force` writes.
         unsafe {
-            let guard: &[Vector] = &guard;
             super::force_gather_set_then(
                 self,
                 &self.flags,
                 force,
                 reads,
                 after,
-                guard,
+                SharedConst(buf.ptr()),
                 x,
                 v,
                 f,
@@ -481,7 +480,7 @@ impl super::Gather for TetForces {
         &self,
         p0: usize,
         p1: usize,
-        buf: &[Vector],
+        buf: *const Vector,
         out: *mut Vector,
         set: bool,
     ) {
@@ -501,7 +500,7 @@ impl super::Gather for TetForces {
                 // Four terms a round, still added one after another (the same bits as one
                 // loop), as in the spring gather.
                 let mut acc = Vector::ZERO;
-                let slot = |s: u32| *buf.get_unchecked(s as usize);
+                let slot = |s: u32| *buf.add(s as usize);
                 let mut list = self
                     .slots
                     .get_unchecked(s0 as usize..s1 as usize)
