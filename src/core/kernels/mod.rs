@@ -244,6 +244,24 @@ pub(crate) fn for_each_chunk_in_two(
     }
 }
 
+/// For each chunk of a kernel's passes (chunk `d` starting at particle `start(d)`, in
+/// ascending order), the first chunk whose force pass reads any of its particles, chunk `c`'s
+/// reads ending before particle `reads_end[c]` and starting at or after its own first
+/// particle: the first chunk of the range its gather waits for ([`force_gather_set_then`]).
+pub(crate) fn first_readers(start: impl Fn(usize) -> usize, reads_end: &[u32]) -> Vec<u32> {
+    let chunks = reads_end.len();
+    let mut first: Vec<u32> = (0..chunks as u32).collect();
+    for (c, &end) in reads_end.iter().enumerate() {
+        for (d, f) in first.iter_mut().enumerate().skip(c + 1) {
+            if start(d) >= end as usize {
+                break;
+            }
+            *f = (*f).min(c as u32);
+        }
+    }
+    first
+}
+
 /// Runs `job(r)` for the consecutive ranges `r` of `chunk` indices that cover `0..n` (the
 /// last one shorter), as [`for_each_chunk`] runs chunks: the particle passes' chunking, in one
 /// place.
@@ -442,7 +460,7 @@ pub(crate) trait Gather: Sync {
 ///
 /// # Safety
 /// `f` holds the kernel's particles; `buf` is its force pass's.
-pub(crate) unsafe fn gather_add<K: Gather>(
+pub(crate) unsafe fn gather_add<K: Gather + ?Sized>(
     kernel: &K,
     buf: SharedConst<K::Slot>,
     f: &mut [Vector],
@@ -459,7 +477,7 @@ pub(crate) unsafe fn gather_add<K: Gather>(
 /// The chunks of a pass over `n` particles that follows a kernel's chunks: the kernel's, then
 /// the particles past its bound in chunks of [`springs::CHUNK_PARTICLES`] (particles no element
 /// refers to, swept alone), for `n ≥` the bound. Returns their number and chunk `c`'s range.
-fn chunks_over<K: Gather>(
+fn chunks_over<K: Gather + ?Sized>(
     kernel: &K,
     n: usize,
 ) -> (usize, impl Fn(usize) -> std::ops::Range<usize>) {
@@ -515,7 +533,7 @@ fn chunks_over<K: Gather>(
 /// # Panics
 /// If `x`, `v` and `f` differ in length.
 #[allow(clippy::too_many_arguments)]
-pub(crate) unsafe fn force_gather_set_then<K: Gather>(
+pub(crate) unsafe fn force_gather_set_then<K: Gather + ?Sized>(
     kernel: &K,
     flags: &PhaseFlags,
     force: impl Fn(usize, Reads) + Sync + Send,
@@ -601,7 +619,7 @@ impl Reads<'_> {
 /// # Safety
 /// `r` is below the length of the three arrays, and no other job touches it while this runs;
 /// `buf` is the kernel's force pass's.
-unsafe fn gather_set_chunk<K: Gather>(
+unsafe fn gather_set_chunk<K: Gather + ?Sized>(
     kernel: &K,
     buf: SharedConst<K::Slot>,
     (xp, vp, fp): (SharedMut<Vector>, SharedMut<Vector>, SharedMut<Vector>),

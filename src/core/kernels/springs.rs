@@ -34,7 +34,7 @@
 //! [`Springs::accumulate_reference`]: crate::core::forces::Springs::accumulate_reference
 
 use super::bands::{Bands, LINE};
-use super::{ChunkLists, PhaseFlags, SharedConst, SharedMut};
+use super::{ChunkLists, Gather, PhaseFlags, SharedConst, SharedMut};
 use crate::core::forces::PackedSpring;
 use crate::math::{Scalar, Vector};
 use std::sync::Mutex;
@@ -228,13 +228,7 @@ impl SpringRows {
             let e = &mut reads_end[chunk_of(s.i.min(s.j))];
             *e = (*e).max(s.i.max(s.j) + 1);
         }
-        let mut first_reader: Vec<u32> = (0..chunks as u32).collect();
-        for (c, &end) in reads_end.iter().enumerate() {
-            let reached = c + 1..(end as usize).div_ceil(chunk);
-            for f in &mut first_reader[reached] {
-                *f = (*f).min(c as u32);
-            }
-        }
+        let first_reader = super::first_readers(|d| d * chunk, &reads_end);
         let springs = &others[..];
         // Counting sort by the lower index, then by the upper within a row (stable).
         let mut row_start = vec![0u32; bound + 1];
@@ -307,8 +301,8 @@ impl SpringRows {
             reads_end,
             first_reader,
             flags: PhaseFlags::new(chunks),
-            partials: Mutex::new(vec![0.0; bound.div_ceil(chunk)]),
-            band_buf: BandBuf::for_bands(bands.as_ref(), bound.div_ceil(chunk)),
+            partials: Mutex::new(vec![0.0; chunks]),
+            band_buf: BandBuf::for_bands(bands.as_ref(), chunks),
             bands,
         }
     }
@@ -333,13 +327,22 @@ impl SpringRows {
         let buf = SharedMut(guard.as_mut_ptr());
         let lines = BandBuf::pointers(&mut bands);
         let slots = SharedConst(buf.ptr() as *const Slot);
+        let with_bands = self.with_bands(lines);
         // SAFETY: as the caller guarantees.
         unsafe {
             self.force_pass(x, v, buf, lines);
-            match self.with_bands(lines) {
-                Some(w) => super::gather_add(&w, slots, f),
-                None => super::gather_add(self, slots, f),
-            }
+            super::gather_add(self.gather_of(&with_bands), slots, f);
+        }
+    }
+
+    /// The gather of the rows, or of the rows and the bands together (`with_bands`).
+    fn gather_of<'a>(
+        &'a self,
+        with_bands: &'a Option<WithBands<'a>>,
+    ) -> &'a dyn Gather<Slot = Slot> {
+        match with_bands {
+            Some(w) => w,
+            None => self,
         }
     }
 
@@ -385,38 +388,25 @@ impl SpringRows {
         };
         let reads = |c: usize| self.reads(c);
         let after = |c: usize| self.first_reader[c] as usize;
+        let with_bands = self.with_bands(lines);
         // SAFETY: as the caller guarantees; `force` and `reads` as `force_gather_set_then`
         // asks, and `slots` the slots `force` writes. The gathers read the slots and the band
         // columns through pointers, each entry where it lies: no entry a gather reads is
         // written while it runs (it waits for every force chunk that writes one), and no entry
         // a force chunk writes is read meanwhile.
         unsafe {
-            match self.with_bands(lines) {
-                Some(w) => super::force_gather_set_then(
-                    &w,
-                    &self.flags,
-                    force,
-                    reads,
-                    after,
-                    slots,
-                    x,
-                    v,
-                    f,
-                    finish,
-                ),
-                None => super::force_gather_set_then(
-                    self,
-                    &self.flags,
-                    force,
-                    reads,
-                    after,
-                    slots,
-                    x,
-                    v,
-                    f,
-                    finish,
-                ),
-            }
+            super::force_gather_set_then(
+                self.gather_of(&with_bands),
+                &self.flags,
+                force,
+                reads,
+                after,
+                slots,
+                x,
+                v,
+                f,
+                finish,
+            );
         }
     }
 

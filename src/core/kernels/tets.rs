@@ -97,6 +97,14 @@ fn borders(start: &[u32], below: &[u32]) -> Vec<u32> {
     b
 }
 
+/// Whether the element lanes run on this processor (AVX).
+fn avx() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    return std::arch::is_x86_feature_detected!("avx");
+    #[cfg(not(target_arch = "x86_64"))]
+    false
+}
+
 /// The address particle 0 would have in `x`, which holds the particles from `from` on: with
 /// a particle's index added, its address (only ever those within `x`).
 #[inline(always)]
@@ -254,15 +262,7 @@ impl TetForces {
                     .fold(borders[c], u32::max)
             })
             .collect();
-        let mut first_reader: Vec<u32> = (0..chunks as u32).collect();
-        for (c, &end) in reads_end.iter().enumerate() {
-            for d in c + 1..chunks {
-                if borders[d] >= end {
-                    break;
-                }
-                first_reader[d] = first_reader[d].min(c as u32);
-            }
-        }
+        let first_reader = super::first_readers(|d| borders[d] as usize, &reads_end);
         #[cfg(target_arch = "x86_64")]
         let lanes = elements
             .chunks_exact(lane::W)
@@ -356,10 +356,7 @@ impl TetForces {
     ) {
         let mut guard = self.buffer.lock().unwrap_or_else(|e| e.into_inner());
         let buf = SharedMut(guard.as_mut_ptr());
-        #[cfg(target_arch = "x86_64")]
-        let avx = std::arch::is_x86_feature_detected!("avx");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx = false;
+        let avx = avx();
         let force = |c: usize, r: super::Reads<'_>| {
             // SAFETY: the chunk's reads (see `force_gather_set_then`); it writes only its own
             // elements' slots.
@@ -391,10 +388,7 @@ impl TetForces {
     /// `x` holds every particle any element refers to.
     unsafe fn force_pass(&self, x: &[Vector], buf: &mut [Vector]) {
         let buf = SharedMut(buf.as_mut_ptr());
-        #[cfg(target_arch = "x86_64")]
-        let avx = std::arch::is_x86_feature_detected!("avx");
-        #[cfg(not(target_arch = "x86_64"))]
-        let avx = false;
+        let avx = avx();
         for_each_chunk(self.chunks(), |c| {
             // SAFETY: as the caller guarantees; a chunk writes only its elements' slots.
             unsafe { self.force_chunk(c, (x, 0), buf, avx) }
