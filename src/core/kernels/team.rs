@@ -19,13 +19,14 @@
 //! Which thread runs a chunk never changes what it computes: chunks write disjoint memory and
 //! every sum is ordered by the chunking alone (see [`super`]), so the bits are those of one
 //! thread. A pass allocates nothing: its description (the job, a pointer to the caller's
-//! closure, and the number of chunks) is written into the team's shared state, and a helper
-//! calls the job only for a chunk it has claimed, which the caller waits for.
+//! reference to its closure, and the number of chunks) is written into the team's shared
+//! state, and a helper calls the job only for a chunk it has claimed, which the caller waits
+//! for. `miri/` holds tests that run this code under Miri.
 
 use std::cell::Cell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::Ordering::{AcqRel, Acquire, Relaxed, Release, SeqCst};
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, fence};
+use std::sync::atomic::{AtomicBool, AtomicPtr, AtomicU64, AtomicUsize, fence};
 use std::sync::{Arc, Mutex, OnceLock, TryLockError};
 use std::thread::{self, JoinHandle, Thread};
 use std::time::{Duration, Instant};
@@ -94,6 +95,10 @@ fn order(tag: u64, e: u64) -> std::cmp::Ordering {
     }
 }
 
+/// A pass's job as its caller holds it, while the pass runs (not for longer: the lifetime
+/// is the helpers' to keep, see [`Shared::run`]).
+type Job = &'static (dyn Fn(usize) + Sync);
+
 /// An atomic on a cache line of its own (two lines: the adjacent-line prefetcher pairs them),
 /// so that what one thread writes every chunk never shares a line with what another reads.
 #[repr(align(128))]
@@ -115,9 +120,12 @@ struct Shared {
     /// sequence lock: a helper reads the description, then this again, and uses it only if
     /// nothing changed).
     seq: AtomicU64,
-    /// The pass's job, `*const (dyn Fn(usize) + Sync)` as two words: valid while pass
-    /// `seq / 2` runs, which a helper knows by claiming one of its chunks.
-    job: [AtomicUsize; 2],
+    /// Where the pass's caller keeps its job (a [`Job`] on its stack): valid while pass
+    /// `seq / 2` runs, which a helper knows by claiming one of its chunks. A thin pointer to
+    /// the caller's reference, rather than the reference's two words as integers: a pointer
+    /// made back from integers has no provenance, and a vtable pointer without it is
+    /// undefined behaviour (Miri: "expected a vtable pointer").
+    job: AtomicPtr<Job>,
     /// The pass's number of chunks, and of phases (jobs per chunk: see [`job_at`]).
     chunks: AtomicUsize,
     phases: AtomicUsize,
@@ -206,14 +214,14 @@ impl Shared {
     fn run(&self, chunks: usize, phases: usize, f: &(dyn Fn(usize) + Sync)) {
         let threads = self.threads();
         let e = self.seq.load(Relaxed) / 2 + 1;
-        // SAFETY (of the helpers' use of the job): a helper calls it only for a chunk of pass
-        // `e` it has claimed, and this function returns only once every chunk is done.
-        let job: [usize; 2] =
-            unsafe { std::mem::transmute::<*const (dyn Fn(usize) + Sync + '_), [usize; 2]>(f) };
+        // The helpers' use of the job: a helper calls it only for a chunk of pass `e` it has
+        // claimed, and this function returns only once every chunk is done, so `job` (and
+        // what it refers to) outlives every such call.
+        let job: &(dyn Fn(usize) + Sync) = f;
+        let job = std::ptr::from_ref(&job).cast::<Job>().cast_mut();
         self.seq.store(2 * e - 1, Relaxed);
         fence(Release);
-        self.job[0].store(job[0], Relaxed);
-        self.job[1].store(job[1], Relaxed);
+        self.job.store(job, Relaxed);
         self.chunks.store(chunks, Relaxed);
         self.phases.store(phases, Relaxed);
         self.seq.store(2 * e, Release);
@@ -285,13 +293,7 @@ impl Shared {
     /// noted, so that the pass ends and its caller panics after it.
     ///
     /// `f` is called only for a chunk claimed in pass `e`, which keeps it valid (see `run`).
-    fn work(
-        &self,
-        me: usize,
-        e: u64,
-        (chunks, phases): (usize, usize),
-        f: *const (dyn Fn(usize) + Sync),
-    ) {
+    fn work(&self, me: usize, e: u64, (chunks, phases): (usize, usize), f: *const Job) {
         let threads = self.threads();
         let mut ran = 0u64;
         let count = |ran: u64| self.done[me].0.store(e << COUNT_BITS | ran, Release);
@@ -316,7 +318,7 @@ impl Shared {
             while let Some(c) = self.claim(t, e, &share) {
                 // SAFETY: job `c` of pass `e` is claimed and not yet counted done, so pass
                 // `e`'s caller is still waiting and its job alive for this call.
-                self.run_chunk(unsafe { &*f }, job_at(c, &share, chunks, phases));
+                self.run_chunk(unsafe { *f }, job_at(c, &share, chunks, phases));
                 ran += 1;
                 count(ran);
             }
@@ -331,7 +333,7 @@ impl Shared {
         while !self.stop.load(Relaxed) {
             let s = self.seq.load(Acquire);
             if s.is_multiple_of(2) && s / 2 != seen {
-                let job = [self.job[0].load(Relaxed), self.job[1].load(Relaxed)];
+                let f = self.job.load(Relaxed);
                 let chunks = self.chunks.load(Relaxed);
                 let phases = self.phases.load(Relaxed);
                 fence(Acquire);
@@ -340,12 +342,6 @@ impl Shared {
                     continue;
                 }
                 seen = s / 2;
-                // SAFETY: the two words of the job pointer the caller wrote for pass `seen`
-                // (checked just above), back as they were; `work` calls it only while that
-                // pass runs.
-                let f = unsafe {
-                    std::mem::transmute::<[usize; 2], *const (dyn Fn(usize) + Sync)>(job)
-                };
                 self.work(me, seen, (chunks, phases), f);
                 idle_since = Instant::now();
                 spins = 0;
@@ -413,7 +409,7 @@ impl Team {
         };
         let shared = Arc::new(Shared {
             seq: AtomicU64::new(0),
-            job: [AtomicUsize::new(0), AtomicUsize::new(0)],
+            job: AtomicPtr::new(std::ptr::null_mut()),
             chunks: AtomicUsize::new(0),
             phases: AtomicUsize::new(1),
             parked: AtomicUsize::new(0),
