@@ -709,8 +709,8 @@ impl Collider {
 }
 
 /// Particles a chunk of [`resolve_all`] holds on the team (about ten microseconds of work
-/// against a sphere and the ground).
-const RESOLVE_CHUNK: usize = 512;
+/// against a sphere and the ground; smaller under Miri).
+const RESOLVE_CHUNK: usize = crate::core::kernels::chunk_limit(512, 64);
 
 /// Every collider's [`Collider::resolve`], in order, at the end `t` of a step of length `h`.
 /// When none of them takes impulses back (no [`Response`]: each particle's response is its

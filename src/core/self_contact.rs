@@ -751,8 +751,9 @@ impl SelfContact {
     }
 }
 
-/// Candidates a chunk of the team's passes over them holds (tens of microseconds of work).
-const PAIR_CHUNK: usize = 1024;
+/// Candidates a chunk of the team's passes over them holds (tens of microseconds of work;
+/// smaller under Miri).
+const PAIR_CHUNK: usize = crate::core::kernels::chunk_limit(1024, 64);
 
 /// The start distances of `pairs` at positions `p0`, four pairs of a kind at a time
 /// ([`distance`]): point–triangle and edge–edge pairs are set aside into their own batch as

@@ -330,6 +330,14 @@ pub struct Chunk<'a> {
 /// forces, sweep, check (see [`crate::core::particles`]'s symplectic Euler).
 pub type Finish<'a> = &'a (dyn Fn(Chunk<'_>) + Sync);
 
+/// A limit on the size of a pass's chunks: `normal`, or `small` when Miri interprets the
+/// crate, so that the bodies it can interpret in minutes still make several chunks and the
+/// team's hand-offs run (`miri/`). Sums follow the chunks, so a Miri build's bits may differ
+/// from a normal build's; within either they do not depend on the thread count.
+pub(crate) const fn chunk_limit(normal: usize, small: usize) -> usize {
+    if cfg!(miri) { small } else { normal }
+}
+
 /// The particles per chunk of a body's passes: at most `most`, at least two chunks when the
 /// body has `most` particles or more (so that it still shares its work), and as even as that
 /// allows, so that no chunk is a sliver that leaves a thread short. It depends on the body

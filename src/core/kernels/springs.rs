@@ -42,7 +42,8 @@ use std::sync::Mutex;
 /// Most particles per chunk, the unit of parallel work of both passes: the force pass takes the
 /// chunk's rows (a cloth's 6 springs a particle: about 9 µs of work on one core, with the
 /// gather and sweep that follow), large enough that handing it to a thread costs little.
-pub const CHUNK_PARTICLES: usize = 1024;
+/// Smaller under Miri.
+pub const CHUNK_PARTICLES: usize = super::chunk_limit(1024, 64);
 
 /// A spring's force in the buffer between the two passes: a `Vec3A` (one 16-byte lane group)
 /// in the f32 build; in the f64 build a `DVec3` padded to 32 bytes and aligned to them, so the

@@ -33,7 +33,8 @@ use std::sync::Mutex;
 
 /// Particles per chunk on average, the unit of parallel work of both passes (a tet mesh has
 /// about four elements a particle: 5 to 6 µs of work on one core, elements, gather and sweep).
-pub const CHUNK_PARTICLES: usize = 128;
+/// Smaller under Miri.
+pub const CHUNK_PARTICLES: usize = super::chunk_limit(128, 32);
 
 /// Elements a chunk's element range is rounded to (the lanes' width in f32, twice it in f64).
 const ELEMENT_GROUP: usize = 8;

@@ -277,8 +277,8 @@ fn span_lanes(span: &[Span]) -> impl Iterator<Item = [Vec4; 6]> + '_ {
 }
 
 /// Triangles a chunk of [`all_bits`] holds on the team (a multiple of four: the batches'
-/// lanes; about ten microseconds of work).
-const BITS_CHUNK: usize = 1024;
+/// lanes; about ten microseconds of work). Smaller under Miri.
+const BITS_CHUNK: usize = crate::core::kernels::chunk_limit(1024, 64);
 
 /// The cone bits of every triangle (`out[t]`) along the paths from `q0` to `q1`, and its
 /// normals at the start and the end (`normals[t]`, as [`SurfaceTree::normals_of`] computes

@@ -31,8 +31,8 @@ use std::sync::Mutex;
 /// Rows per chunk of the solvers' passes (the matrix product and the vector updates), shared
 /// with the team of threads the caller runs in (see [`kernels::with_threads`]): at most this
 /// many, cut by the system's size alone, so the results are the same bits on any number of
-/// threads.
-pub const CHUNK_ROWS: usize = 1024;
+/// threads. Smaller under Miri.
+pub const CHUNK_ROWS: usize = crate::core::kernels::chunk_limit(1024, 64);
 
 /// Marks a row entry that uses its off-diagonal block at `(j, i)`: transposed, unless the
 /// block is symmetric.
