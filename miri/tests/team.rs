@@ -1,22 +1,16 @@
 //! The team of threads and the kernels that write through raw pointers, small enough for Miri:
-//! the fused symplectic Euler step (a force
-//! chunk's phase and the gathers' phase of one pass, on a banded cloth, a tet box and both in
-//! one model), the spring rows on a random network, a linearly implicit Euler step (the
-//! matrix product and the solve on the team), and a self-colliding cloth's first passes (the
-//! cone bits and the colliders in chunks). Each compares one thread with two and three, bit
-//! for bit. Under Miri the library cuts its passes into smaller chunks (`cfg(miri)`) and the
-//! bodies here are smaller, so every body still makes several chunks; outside Miri they are
-//! sized for the chunks of a normal build.
+//! the fused symplectic Euler step (a force chunk's phase and the gathers' phase of one pass,
+//! on a banded cloth, a tet box and both in one model), the spring rows on a random network, a
+//! linearly implicit Euler step (the matrix product and the solve on the team), and a
+//! self-colliding cloth's first passes (the cone bits and the colliders in chunks). Each
+//! compares one thread with two and three, bit for bit. Under Miri the library cuts its passes
+//! into smaller chunks (`cfg(miri)`) and the bodies here are smaller, so every body still makes
+//! several chunks; outside Miri they are sized for the chunks of a normal build.
 //!
 //! Miri gives the float functions whose precision Rust leaves unspecified (`powf`, `sin`,
 //! `cos`, …) results that vary by a few units of round-off from call to call, so each test
 //! makes its scene and step once and hands the same values to every thread count (a pile's
 //! scene and step, made in each run, made one and two threads differ in the f64 build).
-
-/// Chooses the size for Miri or for a normal build.
-fn sized(miri: usize, native: usize) -> usize {
-    if cfg!(miri) { miri } else { native }
-}
 use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
@@ -27,6 +21,11 @@ use bevy_soft_body::core::ode::{OdeSystem, ParticleState};
 use bevy_soft_body::core::scene::Scene;
 use bevy_soft_body::math::{Scalar, Vector, VectorExt};
 use bevy_soft_body::prelude::*;
+
+/// Chooses the size for Miri or for a normal build.
+fn sized(miri: usize, native: usize) -> usize {
+    if cfg!(miri) { miri } else { native }
+}
 
 /// xorshift 13/7/17, as the main tests' generator.
 struct Rng(u64);
@@ -56,7 +55,7 @@ fn bits(s: &ParticleState) -> Vec<[f64; 3]> {
     s.x.iter().chain(&s.v).map(|v| v.to_f64()).collect()
 }
 
-/// A cloth of `n × n` particles, the springs' kernel cut into `⌈n²/1024⌉` chunks.
+/// A cloth of `n × n` particles: two or three chunks of the springs' kernel.
 fn cloth(n: usize) -> Scene {
     let scene = build::cloth(&build::ClothParams::default().resized(n, n)).unwrap();
     assert!(n * n > springs::CHUNK_PARTICLES, "one chunk only");
