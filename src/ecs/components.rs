@@ -122,7 +122,8 @@ pub struct SoftBody {
     /// method and substep count that are stable for this body at the frame's length (and
     /// meet [`AutoSettings`]' tolerance, when one is set), and says why in [`SoftBodyStatus`].
     pub integrator: IntegratorKind,
-    /// How the substep `h` is chosen; substeps land exactly on the fixed frame's end. Ignored
+    /// How the substep `h` is chosen; the fixed frame is cut into substeps of one size, at most
+    /// `h`, that land exactly on its end (`core::driver::equal_substep`). Ignored
     /// under [`IntegratorKind::Auto`], which chooses the substeps itself.
     pub step: StepPolicy,
     /// Viscous drag `−c v` on every free particle (N·s/m).

@@ -1,6 +1,7 @@
 //! [`SoftBodyPlugin`]: gathers each body's components into the core's packed model (only when
-//! something changed), advances every body in parallel with the core driver — substeps that
-//! land exactly on the fixed frame's end, collisions every substep, the divergence guard — and
+//! something changed), advances every body in parallel with the core driver — substeps of one
+//! size that land exactly on the fixed frame's end, collisions every substep, the divergence
+//! guard — and
 //! writes the state back to the components.
 
 use super::components::*;
