@@ -804,18 +804,38 @@ fn distances_in_batches(pairs: &mut [(Pair, f64)], p0: &[DVec3]) {
     }
 }
 
-/// How much closer than its distance a pair's parts can come over the pass: the largest
-/// travel of a point of the first part plus that of the second (a bound: the closest points
-/// move no more than the fastest vertex of their part), from each particle's squared path
-/// over the pass, `step2`.
-fn reach(step2: &[f64], pair: Pair) -> f64 {
+/// How much closer than its distance a pair's parts can come over the pass of length `h`, as
+/// far as a pair with `room` to spare needs to know: the largest travel of a point of the
+/// first part plus that of the second (the closest points move no more than the fastest
+/// vertex of their part), from each particle's squared path over the pass, `step2`; where
+/// that leaves no room, the largest difference of the paths `u h` of a vertex of the first
+/// part and one of the second, which is never larger. That too is a bound: for points
+/// `Σ aᵢxᵢ` and `Σ bⱼyⱼ` of the parts (weights summing to one) the difference moves by
+/// `τ Σᵢⱼ aᵢbⱼ (uᵢ − uⱼ) h`, no more than that, so each such distance, and their least, the
+/// pair's, falls by no more. Parts that move together (a falling cloth over a frame-long
+/// pass) come no closer however far they go; the first bound is cheaper, and enough for
+/// most pairs of a short pass.
+fn reach(step2: &[f64], u: &[DVec3], h: f64, pair: Pair, room: f64) -> f64 {
     let ids = pair.ids();
     let travel = |k: usize| step2[ids[k] as usize];
     let (a, b) = match pair {
         Pair::PointTriangle(..) => (travel(0), travel(1).max(travel(2)).max(travel(3))),
         Pair::EdgeEdge(..) => (travel(0).max(travel(1)), travel(2).max(travel(3))),
     };
-    a.sqrt() + b.sqrt()
+    let own = a.sqrt() + b.sqrt();
+    if own < room {
+        return own;
+    }
+    let v = ids.map(|i| u[i as usize]);
+    let apart = |a: usize, b: usize| v[a].distance_squared(v[b]);
+    let most = match pair {
+        Pair::PointTriangle(..) => apart(0, 1).max(apart(0, 2)).max(apart(0, 3)),
+        Pair::EdgeEdge(..) => apart(0, 2)
+            .max(apart(0, 3))
+            .max(apart(1, 2))
+            .max(apart(1, 3)),
+    };
+    (most.sqrt() * h).min(own)
 }
 
 /// Kinetic energy of the free particles among `verts`.
@@ -928,7 +948,7 @@ impl Ctx<'_> {
         // Marked on the team (a pair to drop gets a NaN distance: a NaN distance would fail
         // the test as well), then dropped in order.
         let (tube, tube_len, thick) = (&s.tube, s.tube_len, self.thick);
-        let step2 = &s.step2;
+        let (step2, u, h) = (&s.step2, &s.u, self.h);
         let out = SharedMut(s.pairs.as_mut_ptr());
         for_each_range(s.pairs.len(), PAIR_CHUNK, |r| {
             // SAFETY: each range is its own chunk's.
@@ -946,7 +966,8 @@ impl Ctx<'_> {
                 }
                 .sqrt()
                     * tube_len;
-                let keep = *d0 - reach(step2, *pair) - drift - slack < PROXIMITY * thick;
+                let room = *d0 - drift - slack - PROXIMITY * thick;
+                let keep = room - reach(step2, u, h, *pair, room) < 0.0;
                 if !keep {
                     *d0 = f64::NAN;
                 }
@@ -1159,7 +1180,8 @@ impl Ctx<'_> {
 
     fn end_separation(&self, s: &mut Scratch, pair: Pair, d0: f64) -> bool {
         let ids = pair.ids();
-        if d0 - reach(&s.step2, pair) >= self.thick {
+        let room = d0 - self.thick;
+        if room - reach(&s.step2, &s.u, self.h, pair, room) >= 0.0 {
             return false;
         }
         let y = Self::positions(ids, |i| s.p0[i] + s.u[i] * self.h);
@@ -1185,7 +1207,8 @@ impl Ctx<'_> {
     fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
         let ids = pair.ids();
         let tol = touch_tolerance(self.thick);
-        if d0 - reach(&s.step2, pair) > tol {
+        let room = d0 - tol;
+        if room - reach(&s.step2, &s.u, self.h, pair, room) > 0.0 {
             return None;
         }
         let x0 = Self::positions(ids, |i| s.p0[i]);
@@ -1663,6 +1686,69 @@ mod tests {
         cubic_roots_in_unit(1.0, -3.0, 2.25, -0.5, |t| r.push(t));
         assert_eq!(r.len(), 1, "{r:?}");
         assert!((r[0] - 0.5).abs() < 1e-6, "{r:?}");
+    }
+
+    /// The distance between a pair's parts with its four particles at `y` (Ericson's
+    /// closest points, checked against brute force below).
+    fn part_distance(pair: Pair, y: [DVec3; 4]) -> f64 {
+        match pair {
+            Pair::PointTriangle(..) => {
+                let b = closest_on_triangle(y[0], y[1], y[2], y[3]);
+                y[0].distance(y[1] * b[0] + y[2] * b[1] + y[3] * b[2])
+            }
+            Pair::EdgeEdge(..) => {
+                let (s, t) = closest_between_segments(y[0], y[1], y[2], y[3]);
+                y[0].lerp(y[1], s).distance(y[2].lerp(y[3], t))
+            }
+        }
+    }
+
+    #[test]
+    fn reach_bounds_how_much_closer_a_pair_comes_over_the_pass() {
+        let mut rnd = crate::math::test_rng(777u64);
+        let h = 0.5;
+        let ids = [0, 1, 2, 3];
+        for case in 0..4000 {
+            let pair = if case % 2 == 0 {
+                Pair::PointTriangle(ids)
+            } else {
+                Pair::EdgeEdge(ids)
+            };
+            let p0 = [0; 4].map(|_| DVec3::new(rnd(), rnd(), rnd()));
+            // Each its own velocity, on a common one up to ten times larger.
+            let common = DVec3::new(rnd(), rnd(), rnd()) * 10.0 * rnd().abs();
+            let u = [0; 4].map(|_| DVec3::new(rnd(), rnd(), rnd()) + common);
+            let step2 = u.map(|v| (v * h).length_squared());
+            let own = reach(&step2, &u, h, pair, f64::INFINITY);
+            let least = reach(&step2, &u, h, pair, f64::NEG_INFINITY);
+            assert!(least <= own);
+            let d0 = part_distance(pair, p0);
+            for k in 1..=32 {
+                let tau = k as f64 / 32.0;
+                let d = part_distance(pair, [0, 1, 2, 3].map(|i| p0[i] + u[i] * h * tau));
+                assert!(
+                    d >= d0 - least * tau - 1e-12,
+                    "case {case}, τ = {tau}: {d} < {d0} − {least} τ"
+                );
+            }
+        }
+        // A common velocity brings nothing closer, however fast.
+        let p0 = [DVec3::Z, DVec3::ZERO, DVec3::X, DVec3::Y];
+        let u = [DVec3::new(3.0, -40.0, 7.0); 4];
+        let step2 = u.map(|v| (v * h).length_squared());
+        let pair = Pair::PointTriangle(ids);
+        assert_eq!(reach(&step2, &u, h, pair, f64::NEG_INFINITY), 0.0);
+        let end = part_distance(pair, [0, 1, 2, 3].map(|i| p0[i] + u[i] * h));
+        assert!((end - part_distance(pair, p0)).abs() < 1e-13, "{end}");
+        // A point heading straight at the triangle's interior closes by exactly the bound.
+        let p0 = [DVec3::new(0.2, 0.2, 1.0), DVec3::ZERO, DVec3::X, DVec3::Y];
+        let mut u = [DVec3::new(3.0, -4.0, 0.0); 4];
+        u[0].z -= 1.5;
+        let step2 = u.map(|v| (v * h).length_squared());
+        let least = reach(&step2, &u, h, pair, f64::NEG_INFINITY);
+        assert!((least - 0.75).abs() < 1e-15, "{least}");
+        let end = part_distance(pair, [0, 1, 2, 3].map(|i| p0[i] + u[i] * h));
+        assert!((end - (1.0 - least)).abs() < 1e-15, "{end}");
     }
 
     #[test]
