@@ -97,22 +97,36 @@ fn surface(scene: &Scene) -> SoftBodySurface {
 /// with the broad/narrow split.
 /// The table; `only`: just the rows of that resolution (64 or 32); the bodies' kernels,
 /// self-contact and colliders on `threads` threads (`core::kernels::with_threads`).
+///
+/// The 64² cloth is run with symplectic Euler at its stable step and with linearly implicit
+/// Euler at 1/60 s, each over the fall and the start of the drape (a sixth of the run) and
+/// over the drape and the fold onto itself (two thirds): where it lies folded, every pass
+/// tests the layers' pairs, and symplectic Euler takes 59 passes' worth of steps a frame.
 fn bench(quick: bool, only: Option<usize>, threads: usize) {
     let frames = if quick { 60 } else { 180 };
     println!(
-        "cloth pile, symplectic Euler at `ClothPileParams::stable_step` (1/1200 s for 32², 1/3500 s for 64²), {frames} frames ({:.1} s), {}, {threads} thread(s)",
-        frames as f64 / 60.0,
+        "cloth pile, symplectic Euler at `ClothPileParams::stable_step` (1/1200 s for 32², 1/3500 s for 64²) or linearly implicit Euler at 1/60 s, {}, {threads} thread(s)",
         PRECISION
     );
     println!(
-        "| scene | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones |"
+        "| scene | method | frames | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones |"
     );
-    println!("| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |");
-    for (cloths, n) in [(1, 64), (3, 32)] {
+    println!(
+        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+    );
+    let se = IntegratorKind::SymplecticEuler;
+    let lie = IntegratorKind::LinearlyImplicitEuler;
+    let rows = [
+        (1, 64, se, frames / 6),
+        (1, 64, se, frames * 2 / 3),
+        (1, 64, lie, frames / 6),
+        (1, 64, lie, frames * 2 / 3),
+        (3, 32, se, frames),
+    ];
+    for (cloths, n, method, frames) in rows {
         if only.is_some_and(|o| o != n) {
             continue;
         }
-        let frames = if n == 64 { frames / 6 } else { frames };
         for on in [false, true] {
             let mut p = ClothPileParams {
                 cloths,
@@ -124,9 +138,14 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
             }
             let scene = cloth_pile(&p).expect("valid pile");
             let (model, state) = scene.build().expect("valid scene");
+            let h = if method == se {
+                p.stable_step()
+            } else {
+                1.0 / 60.0
+            };
             let config = DriverConfig {
-                integrator: IntegratorKind::SymplecticEuler,
-                policy: StepPolicy::Fixed { h: p.stable_step() },
+                integrator: method,
+                policy: StepPolicy::Fixed { h },
                 frame_dt: 1.0 / 60.0,
                 ..Default::default()
             };
@@ -149,7 +168,8 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
             let per = |d: Duration| d.as_secs_f64() * 1e6 / steps as f64;
             let pf = |k: u32| k as f64 / frames as f64;
             println!(
-                "| {cloths} × {n}² | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} |",
+                "| {cloths} × {n}² | {} | {frames} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} |",
+                method.label(),
                 if on { "on" } else { "off" },
                 per(wall),
                 per(r.broad),
