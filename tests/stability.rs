@@ -122,6 +122,18 @@ fn frames_that_are_not_whole_steps_keep_symplectic_euler_stable() {
         (frame / 40.0) as Scalar
     );
     assert_eq!(equal_substep(0.25, 2e-4), 2e-4 as Scalar);
+    // As many substeps as whole steps and a remainder took: a frame a hair over a whole
+    // number of steps (within the slides' 0.1 %) is that many, a hair longer, not one more
+    // step and a sliver; a little more is one more.
+    for (ratio, steps) in [(42.0005, 42.0), (42.03, 43.0), (41.67, 42.0), (0.5, 1.0)] {
+        let h = 1e-3;
+        let got = equal_substep(ratio * h, h as Scalar) as f64;
+        let want = ratio * h / steps;
+        assert!(
+            (got - want).abs() <= 1e-6 * want,
+            "{ratio}: {got} against {want}"
+        );
+    }
 
     let amp = 1e-3;
     let mut s = Scene::default();

@@ -272,8 +272,10 @@ impl SleepParams {
 }
 
 /// The substep for a frame of length `frame` under a policy's step `h`: the frame in
-/// `n = ⌈frame / 1.001 h⌉` substeps of one size, `frame / n ≤ h` (`h` itself when it divides
-/// the frame to round-off, so such frames take exactly the policy's step).
+/// `n = ⌈frame/h − 0.001⌉` substeps of one size `frame / n` — as many as the slides' rule takes
+/// (steps of `h` while more than `1.001 h` remain, then the rest), so at most `1.001 h` — and
+/// `h` itself when that is `frame / n` to round-off, so frames of whole steps take exactly the
+/// policy's step.
 ///
 /// Substeps of `h` and one short remainder (the slides' `min(dt_max, 1.001 (t_frame − t))` on
 /// its own) make each frame's map a product of two different steps' maps. Near symplectic
@@ -287,9 +289,9 @@ pub fn equal_substep(frame: f64, h: Scalar) -> Scalar {
     if !(frame > 0.0 && h64 > 0.0 && frame.is_finite() && h64.is_finite()) {
         return h;
     }
-    let n = (frame / (1.001 * h64)).ceil().max(1.0);
+    let n = (frame / h64 - 0.001).ceil().max(1.0);
     let equal = frame / n;
-    if equal >= h64 * (1.0 - 1e-6) {
+    if (equal - h64).abs() <= 1e-6 * h64 {
         h
     } else {
         equal as Scalar
