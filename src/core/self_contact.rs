@@ -1695,16 +1695,7 @@ mod tests {
     /// The distance between a pair's parts with its four particles at `y` (Ericson's
     /// closest points, checked against brute force below).
     fn part_distance(pair: Pair, y: [DVec3; 4]) -> f64 {
-        match pair {
-            Pair::PointTriangle(..) => {
-                let b = closest_on_triangle(y[0], y[1], y[2], y[3]);
-                y[0].distance(y[1] * b[0] + y[2] * b[1] + y[3] * b[2])
-            }
-            Pair::EdgeEdge(..) => {
-                let (s, t) = closest_between_segments(y[0], y[1], y[2], y[3]);
-                y[0].lerp(y[1], s).distance(y[2].lerp(y[3], t))
-            }
-        }
+        Ctx::closest(pair, y).1
     }
 
     #[test]
