@@ -9,7 +9,9 @@ mod common;
 
 use bevy_soft_body::core::build::{ClothParams, ClothPileParams, ClothPins, cloth, cloth_pile};
 use bevy_soft_body::core::scene::ParticleDesc;
-use bevy_soft_body::core::self_contact::{CCD_PASSES, SelfContactParams, SelfContactReport};
+use bevy_soft_body::core::self_contact::{
+    CCD_PASSES, ContactSurface, SelfContact, SelfContactParams, SelfContactReport,
+};
 use bevy_soft_body::core::tear::{TearParams, tear_scene};
 use bevy_soft_body::prelude::*;
 use common::intersect::{closest_approach, closest_edge_approach, intersecting_pairs};
@@ -189,7 +191,7 @@ fn a_cloth_draping_in_steps_a_frame_long_never_intersects_itself() {
     // it only because separation and detection alternate until neither has anything to do:
     // with one separation sweep before the detection, particles ended 0.014 mm from
     // triangles at this 8 mm thickness, in 64 of the 300 frames under half of it (measured:
-    // 6.3 mm now in f32, 7.3 mm in f64, for particles and for edges).
+    // 7.9 mm now in f32, 7.3 mm in f64, for particles and for edges).
     let config = DriverConfig {
         integrator: IntegratorKind::LinearlyImplicitEuler,
         policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
@@ -453,6 +455,63 @@ fn collisions_never_add_kinetic_energy() {
         t.kinetic_before, t.kinetic_after, t.kinetic_rise
     );
     assert!(t.kinetic_after < t.kinetic_before);
+}
+
+#[test]
+fn a_collision_at_the_end_of_a_pass_separates_its_pair_by_a_tenth_of_the_thickness() {
+    // A point falls straight onto a pinned triangle from 3 thicknesses above it and reaches
+    // its plane at 0.999 of the pass (beyond the proximity band at the start, and crossed at
+    // the end, so only the continuous test sees it). The response changes the point's
+    // average velocity over the pass: stopping the approach keeps it at its start height
+    // all along, and the separation adds a tenth of the thickness by the end. So it ends
+    // exactly 3.1 thicknesses above (to round-off), however late in the pass the collision
+    // came. (Spread over the rest of the pass after the collision instant, the separation
+    // put it 103 thicknesses above.) The point is a vertex of a small tilted triangle moving
+    // with it, whose other vertices stay far above.
+    let (thick, h) = (0.01, 1.0 / 60.0);
+    let lower = [[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [0.0, 0.0, 1.5]];
+    let upper = [
+        [0.0, 3.0 * thick, 0.0],
+        [0.05, 0.08, 0.0],
+        [0.0, 0.08, 0.05],
+    ];
+    let fall = 3.0 * thick / 0.999;
+    let v = Vector::new(0.0, (-fall / h) as Scalar, 0.0);
+    let to = |p: [f64; 3]| Vector::new(p[0] as Scalar, p[1] as Scalar, p[2] as Scalar);
+    let x0: Vec<Vector> = lower.iter().chain(&upper).map(|&p| to(p)).collect();
+    let mut x: Vec<Vector> = (0..6)
+        .map(|i| {
+            if i < 3 {
+                x0[i]
+            } else {
+                x0[i] + v * h as Scalar
+            }
+        })
+        .collect();
+    let mut vel: Vec<Vector> = (0..6)
+        .map(|i| if i < 3 { Vector::ZERO } else { v })
+        .collect();
+    let inv_mass: Vec<Scalar> = vec![0.0, 0.0, 0.0, 100.0, 100.0, 100.0];
+    let mut sc = SelfContact::new(
+        ContactSurface::new(&[[0, 1, 2], [3, 4, 5]]),
+        SelfContactParams {
+            thickness: thick,
+            friction: 0.5,
+        },
+    );
+    let rep = sc.resolve(h as Scalar, &x0, &mut x, &mut vel, &inv_mass);
+    println!("{rep:?}; the point ends at {} m", x[3].y);
+    assert_eq!(rep.collisions, 1);
+    assert!(!rep.failed && rep.zones == 0);
+    let end = x[3].y as f64;
+    assert!(
+        (end - 3.1 * thick).abs() < 1e-4 * thick,
+        "the point ended {:.4} thicknesses above the triangle",
+        end / thick
+    );
+    // The triangle's other vertices went on falling, to 5 thicknesses above; nothing else
+    // collided.
+    assert!(x[4].y as f64 > 4.9 * thick && x[5].y as f64 > 4.9 * thick);
 }
 
 /// A 16×16 cloth (0.6 m, 10 g particles) at 20 m/s straight down onto a box 1 cm thick; one
