@@ -1258,8 +1258,9 @@ impl Ctx<'_> {
         }
     }
 
-    /// A Gauss–Seidel sweep of [`Ctx::end_separation`] over the candidates (`all`), or over
-    /// those with a particle whose path changed since the last such sweep; the number pushed.
+    /// A Gauss–Seidel sweep of [`Ctx::end_separation`] over the candidates whose particles'
+    /// paths changed since the last such sweep (all of them, when the candidates are not
+    /// those it swept: see [`Epochs`]); the number pushed.
     fn separation_sweep(&self, s: &mut Scratch) -> u32 {
         let mut last = s.epoch.separation;
         let since = s.epoch.begin(&mut last);
@@ -1275,9 +1276,9 @@ impl Ctx<'_> {
     }
 
     /// A Gauss–Seidel sweep of continuous detection, each collision answered at once (see
-    /// [`Ctx::collision_impulse`]), over the candidates (`all`), or over those with a
-    /// particle whose path changed since the last such sweep (the others were found clean
-    /// on the same paths); the number of collisions.
+    /// [`Ctx::collision_impulse`]), over the candidates whose particles' paths changed since
+    /// the last such sweep (the others were found clean on the same paths; all of them, when
+    /// the candidates are not those it swept); the number of collisions.
     fn ccd_sweep(&self, s: &mut Scratch) -> u32 {
         let mut last = s.epoch.ccd;
         let since = s.epoch.begin(&mut last);
