@@ -495,24 +495,33 @@ impl Scratch {
     }
 }
 
+/// The kinds of sweep over the candidates, each with its own record in [`Epochs`].
+#[derive(Clone, Copy, Debug)]
+enum Sweep {
+    /// [`Ctx::end_separation`].
+    Separation = 0,
+    /// Continuous detection and [`Ctx::collision_impulse`].
+    Ccd = 1,
+}
+
 /// Sweeps counted over the handler's life, so a sweep need look only at the pairs whose
 /// paths changed since the last sweep of its kind (what a sweep does to a pair depends on
-/// its particles' paths alone): `now` is the sweep under way (or the last), `separation`
-/// and `ccd` the last of each kind with the candidate set it swept; `set` counts the
-/// candidate sets (a new pass, a search, a resumed walk: pairs no sweep has seen).
+/// its particles' paths alone): `now` is the sweep under way (or the last), `last` the last
+/// of each kind ([`Sweep`]) with the candidate set it swept; `set` counts the candidate sets
+/// (a new pass, a search, a resumed walk: pairs no sweep has seen).
 #[derive(Clone, Copy, Debug, Default)]
 struct Epochs {
     now: u64,
     set: u64,
-    separation: (u64, u64),
-    ccd: (u64, u64),
+    last: [(u64, u64); 2],
 }
 
 impl Epochs {
-    /// Starts a sweep whose last of its kind was `last`: the sweep from which on a change
-    /// of a pair's particles means the pair must be looked at (0, all of them, when the
-    /// candidates are not those that sweep saw).
-    fn begin(&mut self, last: &mut (u64, u64)) -> u64 {
+    /// Starts a sweep of `kind`: the sweep from which on a change of a pair's particles
+    /// means the pair must be looked at (0, all of them, when the candidates are not those
+    /// the last sweep of its kind saw).
+    fn begin(&mut self, kind: Sweep) -> u64 {
+        let last = &mut self.last[kind as usize];
         let since = if last.1 == self.set { last.0 } else { 0 };
         self.now += 1;
         *last = (self.now, self.set);
@@ -1258,42 +1267,43 @@ impl Ctx<'_> {
         }
     }
 
-    /// A Gauss–Seidel sweep of [`Ctx::end_separation`] over the candidates whose particles'
-    /// paths changed since the last such sweep (all of them, when the candidates are not
-    /// those it swept: see [`Epochs`]); the number pushed.
-    fn separation_sweep(&self, s: &mut Scratch) -> u32 {
-        let mut last = s.epoch.separation;
-        let since = s.epoch.begin(&mut last);
-        s.epoch.separation = last;
-        let mut pushed = 0;
+    /// A Gauss–Seidel sweep of `kind` over the candidates whose particles' paths changed
+    /// since the last sweep of that kind (the others are as that sweep left them; all of
+    /// them, when the candidates are not those it swept: see [`Epochs`]): `visit` looks at a
+    /// pair (with its distance at the start) and says whether it acted. The number of pairs
+    /// it acted on.
+    fn sweep(
+        &self,
+        s: &mut Scratch,
+        kind: Sweep,
+        mut visit: impl FnMut(&Self, &mut Scratch, Pair, f64) -> bool,
+    ) -> u32 {
+        let since = s.epoch.begin(kind);
+        let mut acted = 0;
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
-            if s.changed_since(pair, since) {
-                pushed += self.end_separation(s, pair, d0) as u32;
+            if s.changed_since(pair, since) && visit(self, s, pair, d0) {
+                acted += 1;
             }
         }
-        pushed
+        acted
     }
 
-    /// A Gauss–Seidel sweep of continuous detection, each collision answered at once (see
-    /// [`Ctx::collision_impulse`]), over the candidates whose particles' paths changed since
-    /// the last such sweep (the others were found clean on the same paths; all of them, when
-    /// the candidates are not those it swept); the number of collisions.
+    /// A sweep of [`Ctx::end_separation`]; the number of pairs pushed.
+    fn separation_sweep(&self, s: &mut Scratch) -> u32 {
+        self.sweep(s, Sweep::Separation, Self::end_separation)
+    }
+
+    /// A sweep of continuous detection, each collision answered at once (see
+    /// [`Ctx::collision_impulse`]); the number of collisions.
     fn ccd_sweep(&self, s: &mut Scratch) -> u32 {
-        let mut last = s.epoch.ccd;
-        let since = s.epoch.begin(&mut last);
-        s.epoch.ccd = last;
-        let mut found = 0;
-        for k in 0..s.pairs.len() {
-            let (pair, d0) = s.pairs[k];
-            if s.changed_since(pair, since)
-                && let Some((_, st, nrm)) = self.ccd(s, pair, d0)
-            {
-                found += 1;
-                self.collision_impulse(s, &st, nrm);
-            }
-        }
-        found
+        self.sweep(s, Sweep::Ccd, |ctx, s, pair, d0| {
+            let Some((st, nrm)) = ctx.ccd(s, pair, d0) else {
+                return false;
+            };
+            ctx.collision_impulse(s, &st, nrm);
+            true
+        })
     }
 
     /// Pushes the pair apart to the thickness at the end of the pass, in position only (see
@@ -1322,9 +1332,9 @@ impl Ctx<'_> {
         true
     }
 
-    /// The earliest contact of the pair over the step: (fraction of the step, the stencil at
-    /// that instant, the unit normal).
-    fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(f64, Stencil, DVec3)> {
+    /// The earliest contact of the pair over the step: (the stencil at that instant, the
+    /// unit normal).
+    fn ccd(&self, s: &Scratch, pair: Pair, d0: f64) -> Option<(Stencil, DVec3)> {
         let ids = pair.ids();
         let tol = touch_tolerance(self.thick);
         let room = d0 - tol;
@@ -1366,16 +1376,16 @@ impl Ctx<'_> {
             let y = [0, 1, 2, 3].map(|k| x0[k] + dx[k] * tau);
             let (wt, d, nrm) = Self::closest(pair, y);
             if d <= tol {
-                found = Some((tau, Stencil { idx: ids, wt }, nrm));
+                found = Some((Stencil { idx: ids, wt }, nrm));
             }
         });
-        let (tau, st, mut nrm) = found?;
+        let (st, mut nrm) = found?;
         // Orient the normal against the approach.
         let vr = Self::relative(&st, &s.u);
         if vr.dot(nrm) > 0.0 {
             nrm = -nrm;
         }
-        Some((tau, st, nrm))
+        Some((st, nrm))
     }
 
     /// Response to a collision: the approach stops (with friction), and the pair separates
