@@ -9,7 +9,12 @@
 //!
 //! 1. **Proximity**: point–triangle and edge–edge pairs closer than [`PROXIMITY`] thicknesses
 //!    at the start stop approaching: an inelastic impulse with the pair's effective mass, and
-//!    Coulomb friction limited by it (`|Δv_t| ≤ μ |Δv_n|`);
+//!    Coulomb friction limited by it (`|Δv_t| ≤ μ |Δv_n|`), in Gauss–Seidel sweeps of
+//!    sequential impulses (the impulses of a pair accumulated over the pass: it only ever
+//!    pushes, its friction stays within μ times its push, and a pair that other pairs'
+//!    impulses leave separating faster than the step made it gives back its own push) until
+//!    no pair's motion changes by more than [`SEPARATION_SLACK`] thicknesses over the pass:
+//!    a layer stopped against the one below pushes that one on, and a stack rests;
 //! 2. **Separation**: pairs closer than the thickness at the end are pushed apart in position
 //!    only (the velocity is not changed, so the push adds no kinetic energy), in
 //!    Gauss–Seidel sweeps (a layer pushed off another pushes the one above it);
@@ -356,6 +361,14 @@ pub const PROXIMITY: f64 = 1.5;
 /// would drive what it touches.
 pub const SUPPORT_MASS: f64 = 16.0;
 
+/// Gauss–Seidel sweeps of the proximity impulses in a pass, at most: a layer stopped against
+/// the one below pushes that one on, and an impulse at a triangle's point moves its corners
+/// unequally, leaving pairs that share them approaching or separating. They stop once no
+/// pair's motion over the pass changes by more than [`SEPARATION_SLACK`] thicknesses. Four
+/// cloths stacked on a pinned one and stepped a frame at a time (`tests/self_collision.rs`)
+/// keep 2·10⁻⁵ J of kinetic energy over 1.5–2 s with 32, 0.14 J with one.
+pub const PROXIMITY_SWEEPS: u32 = 32;
+
 /// Gauss–Seidel sweeps of the end separation in a round (see [`SEPARATION_ROUNDS`]): pairs
 /// sharing particles push each other back, a layer lying on another on a third over several
 /// sweeps.
@@ -408,6 +421,13 @@ struct Scratch {
     step2: Vec<f64>,
     /// End velocities of the surface's particles.
     vel: Vec<DVec3>,
+    /// `u` and `vel` as the step gave them, before the proximity impulses (see
+    /// [`Ctx::restrain`]).
+    u0: Vec<DVec3>,
+    vel0: Vec<DVec3>,
+    /// The pass's proximity band: its pairs, each with what its impulses changed its
+    /// relative velocities by so far (see [`Held`]).
+    held: Vec<Held>,
     w: Vec<f64>,
     zone: Vec<u32>,
     tree: SurfaceTree,
@@ -463,8 +483,8 @@ impl Scratch {
         self.edits += 1;
         for &i in ids {
             self.step2[i as usize] = (self.u[i as usize] * self.h).length_squared();
-            self.changed[i as usize] = self.epoch.now;
         }
+        self.mark(ids);
         if self.moved_all {
             return;
         }
@@ -476,14 +496,23 @@ impl Scratch {
         }
     }
 
+    /// Marks the particles `ids` as changed in the sweep under way: their end velocities
+    /// changed (and their paths, when [`Scratch::touch`] calls it).
+    fn mark(&mut self, ids: &[u32; 4]) {
+        for &i in ids {
+            self.changed[i as usize] = self.epoch.now;
+        }
+    }
+
     /// Whether a particle of `pair` changed its path in or after the sweep `since` (always,
     /// for 0).
     fn changed_since(&self, pair: Pair, since: u64) -> bool {
-        since == 0
-            || pair
-                .ids()
-                .iter()
-                .any(|&i| self.changed[i as usize] >= since)
+        self.changed_since_ids(&pair.ids(), since)
+    }
+
+    /// [`Scratch::changed_since`] for the particles `ids`.
+    fn changed_since_ids(&self, ids: &[u32; 4], since: u64) -> bool {
+        since == 0 || ids.iter().any(|&i| self.changed[i as usize] >= since)
     }
 
     fn clear_moved(&mut self) {
@@ -502,6 +531,8 @@ enum Sweep {
     Separation = 0,
     /// Continuous detection and [`Ctx::collision_impulse`].
     Ccd = 1,
+    /// [`Ctx::proximity_impulse`].
+    Proximity = 2,
 }
 
 /// Sweeps counted over the handler's life, so a sweep need look only at the pairs whose
@@ -513,7 +544,7 @@ enum Sweep {
 struct Epochs {
     now: u64,
     set: u64,
-    last: [(u64, u64); 2],
+    last: [(u64, u64); 3],
 }
 
 impl Epochs {
@@ -527,6 +558,20 @@ impl Epochs {
         *last = (self.now, self.set);
         since
     }
+}
+
+/// A pair in a pass's proximity band: its closest points and normal at the start, and what
+/// its friction changed its relative velocity by so far this pass, in the average velocities
+/// (`u`) and in the end velocities (`vel`).
+#[derive(Clone, Copy, Debug)]
+struct Held {
+    st: Stencil,
+    nrm: DVec3,
+    /// Whether the later sweeps look at it: not a point whose nearest point on the triangle
+    /// is on the triangle's border (see [`Ctx::proximity_sweeps`]).
+    again: bool,
+    u: (f64, DVec3),
+    vel: (f64, DVec3),
 }
 
 /// A point–triangle (`[p, a, b, c]`) or edge–edge (`[a, b, c, d]`) pair, by its four
@@ -716,12 +761,7 @@ impl SelfContact {
         if !rebuilt {
             ctx.start_distances(s, 0);
         }
-        for k in 0..s.pairs.len() {
-            let (pair, d0) = s.pairs[k];
-            if d0 < PROXIMITY * ctx.thick && ctx.proximity_impulse(s, pair) {
-                rep.proximity += 1;
-            }
-        }
+        rep.proximity = ctx.proximity_sweeps(s);
         rep.narrow += t1.elapsed();
         rep.candidates = s.pairs.len() as u32;
 
@@ -1238,16 +1278,96 @@ impl Ctx<'_> {
         ids.map(|i| f(i as usize))
     }
 
-    fn proximity_impulse(&self, s: &mut Scratch, pair: Pair) -> bool {
+    /// Takes a candidate pair into the pass's proximity band when it is closer than
+    /// [`PROXIMITY`] thicknesses at the start (and the proximity is its own: see
+    /// [`Ctx::proper`]), with its closest points and normal there, and restrains it
+    /// ([`Ctx::restrain_held`]); `None` when it is not in the band.
+    fn proximity_impulse(&self, s: &mut Scratch, pair: Pair, d0: f64) -> Option<f64> {
+        if d0 >= PROXIMITY * self.thick {
+            return None;
+        }
         let ids = pair.ids();
         let y = Self::positions(ids, |i| s.p0[i]);
         let (wt, d, nrm) = Self::closest(pair, y);
         if d >= PROXIMITY * self.thick || !Self::proper(pair, &wt) {
-            return false;
+            return None;
         }
-        let st = Stencil { idx: ids, wt };
-        self.inelastic(s, &st, nrm);
-        true
+        // A point whose nearest point on the triangle lies on its border (one weight zero):
+        // the normal tilts off the surfaces' where two layers lie on each other.
+        let border = matches!(pair, Pair::PointTriangle(..)) && wt[1..].iter().any(|&b| -b < 1e-6);
+        s.held.push(Held {
+            st: Stencil { idx: ids, wt },
+            nrm,
+            again: !border,
+            u: (0.0, DVec3::ZERO),
+            vel: (0.0, DVec3::ZERO),
+        });
+        Some(self.restrain_held(s, s.held.len() - 1))
+    }
+
+    /// The pair in the proximity band's `slot` stops approaching and separates no faster
+    /// than the step made it, with friction (see [`Ctx::restrain`]), in the average and in
+    /// the end velocities: by how much its motion over the pass changed (0 when it was
+    /// within those bounds and nothing slid).
+    fn restrain_held(&self, s: &mut Scratch, slot: usize) -> f64 {
+        let held = &mut s.held[slot];
+        let (st, nrm) = (held.st, held.nrm);
+        let by = Self::restrain(&s.w, &mut s.u, &s.u0, &st, nrm, self.mu, &mut held.u);
+        let end = Self::restrain(&s.w, &mut s.vel, &s.vel0, &st, nrm, self.mu, &mut held.vel);
+        if by > 0.0 {
+            s.touch(&st.idx);
+        } else if end > 0.0 {
+            s.mark(&st.idx);
+        }
+        by * self.h
+    }
+
+    /// Sequential impulses with accumulated impulses (Catto, *Iterative dynamics with
+    /// temporal coherence*, GDC 2005) on the pair's relative velocity in `field` (average or
+    /// end velocities), `held` being what the pair's impulses changed it by so far this pass,
+    /// along `nrm` and across it. Along the normal: an approaching pair stops; one separating
+    /// faster than the step made it (`start`; other pairs' impulses on particles it shares)
+    /// is brought back towards that, but only by undoing its own pushes, so over the pass a
+    /// pair only ever pushes. Across it, friction stops the relative velocity as far as
+    /// Coulomb allows, within μ times the pair's push so far, so sweeps that undo and redo a
+    /// push give no fresh friction. What a pair's impulses add up to over the pass is so one
+    /// impulse within Coulomb's cone, as Bridson et al.'s single inelastic impulse is. How
+    /// much the relative velocity changed (0 when nothing did).
+    fn restrain(
+        w: &[f64],
+        field: &mut [DVec3],
+        start: &[DVec3],
+        st: &Stencil,
+        nrm: DVec3,
+        mu: f64,
+        held: &mut (f64, DVec3),
+    ) -> f64 {
+        let vr = Self::relative(st, field);
+        let vn = vr.dot(nrm);
+        let cap = Self::relative(st, start).dot(nrm).max(0.0);
+        let dn = if vn < 0.0 {
+            -vn
+        } else if vn > cap {
+            (cap - vn).max(-held.0)
+        } else {
+            0.0
+        };
+        held.0 += dn;
+        let budget = mu * held.0.max(0.0);
+        let want = held.1 - (vr - nrm * vn);
+        let len = want.length();
+        let across = if len > budget {
+            want * (budget / len)
+        } else {
+            want
+        };
+        let dt = across - held.1;
+        held.1 = across;
+        let change = (nrm * dn + dt).length();
+        if change > 0.0 {
+            Self::apply(w, field, st, nrm * dn + dt);
+        }
+        change
     }
 
     /// Whether a proximity is the pair's own: any point–triangle pair, and edges whose
@@ -1267,6 +1387,50 @@ impl Ctx<'_> {
         }
     }
 
+    /// The proximity impulses ([`Ctx::proximity_impulse`]) in Gauss–Seidel sweeps against
+    /// the motion the step gave: a layer stopped against the one below pushes that one on,
+    /// and an impulse can leave a pair sharing its particles approaching or separating. The
+    /// first sweep looks at every candidate; the later ones at those it found in the
+    /// proximity band whose particles changed since the last, until no pair's motion over the
+    /// pass changed by more than [`SEPARATION_SLACK`] thicknesses. They leave out points
+    /// whose nearest point on the triangle is on its border: their normal tilts off the
+    /// surfaces' (a point of one layer beside another's edge), and pushing them until they
+    /// settled crushed the draping cloth's triangles in its plane (with linearly implicit
+    /// Euler at 1/60 s in `f64`, a particle came within 2.9 mm of the triangle beside it at
+    /// an 8 mm thickness; 7.5 mm leaving them out, 7.3 mm with one sweep). The number of
+    /// pairs in the band.
+    fn proximity_sweeps(&self, s: &mut Scratch) -> u32 {
+        s.u0.clone_from(&s.u);
+        s.vel0.clone_from(&s.vel);
+        s.held.clear();
+        let since = s.epoch.begin(Sweep::Proximity);
+        let mut off = 0;
+        for k in 0..s.pairs.len() {
+            let (pair, d0) = s.pairs[k];
+            if !s.changed_since(pair, since) {
+                continue;
+            }
+            if let Some(by) = self.proximity_impulse(s, pair, d0) {
+                off += u32::from(by > SEPARATION_SLACK * self.thick);
+            }
+        }
+        for _ in 1..PROXIMITY_SWEEPS {
+            if off == 0 {
+                break;
+            }
+            off = 0;
+            let since = s.epoch.begin(Sweep::Proximity);
+            for slot in 0..s.held.len() {
+                let held = &s.held[slot];
+                if held.again && s.changed_since_ids(&held.st.idx, since) {
+                    let by = self.restrain_held(s, slot);
+                    off += u32::from(by > SEPARATION_SLACK * self.thick);
+                }
+            }
+        }
+        s.held.len() as u32
+    }
+
     /// A Gauss–Seidel sweep of `kind` over the candidates whose particles' paths changed
     /// since the last sweep of that kind (the others are as that sweep left them; all of
     /// them, when the candidates are not those it swept: see [`Epochs`]): `visit` looks at a
@@ -1276,13 +1440,13 @@ impl Ctx<'_> {
         &self,
         s: &mut Scratch,
         kind: Sweep,
-        mut visit: impl FnMut(&Self, &mut Scratch, Pair, f64) -> bool,
+        mut visit: impl FnMut(&Self, &mut Scratch, usize, Pair, f64) -> bool,
     ) -> u32 {
         let since = s.epoch.begin(kind);
         let mut acted = 0;
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
-            if s.changed_since(pair, since) && visit(self, s, pair, d0) {
+            if s.changed_since(pair, since) && visit(self, s, k, pair, d0) {
                 acted += 1;
             }
         }
@@ -1291,13 +1455,15 @@ impl Ctx<'_> {
 
     /// A sweep of [`Ctx::end_separation`]; the number of pairs pushed.
     fn separation_sweep(&self, s: &mut Scratch) -> u32 {
-        self.sweep(s, Sweep::Separation, Self::end_separation)
+        self.sweep(s, Sweep::Separation, |ctx, s, _, pair, d0| {
+            ctx.end_separation(s, pair, d0)
+        })
     }
 
     /// A sweep of continuous detection, each collision answered at once (see
     /// [`Ctx::collision_impulse`]); the number of collisions.
     fn ccd_sweep(&self, s: &mut Scratch) -> u32 {
-        self.sweep(s, Sweep::Ccd, |ctx, s, pair, d0| {
+        self.sweep(s, Sweep::Ccd, |ctx, s, _, pair, d0| {
             let Some((st, nrm)) = ctx.ccd(s, pair, d0) else {
                 return false;
             };
