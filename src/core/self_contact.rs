@@ -272,7 +272,8 @@ pub struct SelfContactReport {
     pub tested: u64,
     /// Times a culled patch stopped being flat between searches and was walked on its own.
     pub resumed: u32,
-    /// Pairs closer than the thickness at the start of the step (impulses).
+    /// Pairs in the proximity band at the start of the pass (closer than [`PROXIMITY`]
+    /// thicknesses: impulses).
     pub proximity: u32,
     /// Pairs pushed apart at the end of the step.
     pub separated: u32,
@@ -561,8 +562,9 @@ impl Epochs {
 }
 
 /// A pair in a pass's proximity band: its closest points and normal at the start, and what
-/// its friction changed its relative velocity by so far this pass, in the average velocities
-/// (`u`) and in the end velocities (`vel`).
+/// its impulses changed its relative velocity by so far this pass, along the normal and
+/// across it (see [`Ctx::restrain`]), in the average velocities (`u`) and in the end
+/// velocities (`vel`).
 #[derive(Clone, Copy, Debug)]
 struct Held {
     st: Stencil,
@@ -1403,13 +1405,12 @@ impl Ctx<'_> {
         s.u0.clone_from(&s.u);
         s.vel0.clone_from(&s.vel);
         s.held.clear();
-        let since = s.epoch.begin(Sweep::Proximity);
+        // A pass's first sweep of any kind sees every candidate; this one starts the count of
+        // changes for the later ones.
+        s.epoch.begin(Sweep::Proximity);
         let mut off = 0;
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
-            if !s.changed_since(pair, since) {
-                continue;
-            }
             if let Some(by) = self.proximity_impulse(s, pair, d0) {
                 off += u32::from(by > SEPARATION_SLACK * self.thick);
             }
@@ -1440,13 +1441,13 @@ impl Ctx<'_> {
         &self,
         s: &mut Scratch,
         kind: Sweep,
-        mut visit: impl FnMut(&Self, &mut Scratch, usize, Pair, f64) -> bool,
+        mut visit: impl FnMut(&Self, &mut Scratch, Pair, f64) -> bool,
     ) -> u32 {
         let since = s.epoch.begin(kind);
         let mut acted = 0;
         for k in 0..s.pairs.len() {
             let (pair, d0) = s.pairs[k];
-            if s.changed_since(pair, since) && visit(self, s, k, pair, d0) {
+            if s.changed_since(pair, since) && visit(self, s, pair, d0) {
                 acted += 1;
             }
         }
@@ -1455,15 +1456,13 @@ impl Ctx<'_> {
 
     /// A sweep of [`Ctx::end_separation`]; the number of pairs pushed.
     fn separation_sweep(&self, s: &mut Scratch) -> u32 {
-        self.sweep(s, Sweep::Separation, |ctx, s, _, pair, d0| {
-            ctx.end_separation(s, pair, d0)
-        })
+        self.sweep(s, Sweep::Separation, Self::end_separation)
     }
 
     /// A sweep of continuous detection, each collision answered at once (see
     /// [`Ctx::collision_impulse`]); the number of collisions.
     fn ccd_sweep(&self, s: &mut Scratch) -> u32 {
-        self.sweep(s, Sweep::Ccd, |ctx, s, _, pair, d0| {
+        self.sweep(s, Sweep::Ccd, |ctx, s, pair, d0| {
             let Some((st, nrm)) = ctx.ccd(s, pair, d0) else {
                 return false;
             };
