@@ -1245,35 +1245,26 @@ impl Ctx<'_> {
         }
     }
 
-    /// An inelastic impulse in `field` that stops the pair's approach along `nrm`, with
-    /// Coulomb friction limited by it (`|Δv_t| ≤ μ Δv_n`); nothing when it is not
-    /// approaching. It never adds kinetic energy.
-    fn stop_approach(w: &[f64], field: &mut [DVec3], st: &Stencil, nrm: DVec3, mu: f64) -> bool {
-        let vr = Self::relative(st, field);
-        let vn = vr.dot(nrm);
-        if vn >= 0.0 {
-            return false;
-        }
-        let dvn = -vn;
-        let vt = vr - nrm * vn;
-        let vt_len = vt.length();
-        let dvt = if vt_len > 0.0 {
-            -vt * (mu * dvn / vt_len).min(1.0)
-        } else {
-            DVec3::ZERO
-        };
-        Self::apply(w, field, st, nrm * dvn + dvt);
-        true
-    }
-
     /// The pair stops approaching, in the average velocities (the motion over the step) and
     /// in the end velocities, each by its own inelastic impulse: a pair whose end velocities
     /// already separate is left as it is.
     fn inelastic(&self, s: &mut Scratch, st: &Stencil, nrm: DVec3) {
-        if Self::stop_approach(&s.w, &mut s.u, st, nrm, self.mu) {
+        // One impulse: nothing held before it, and no separation to bound.
+        let once = |w: &[f64], field: &mut [DVec3]| {
+            Self::restrain(
+                w,
+                field,
+                f64::INFINITY,
+                st,
+                nrm,
+                self.mu,
+                &mut (0.0, DVec3::ZERO),
+            )
+        };
+        if once(&s.w, &mut s.u) > 0.0 {
             s.touch(&st.idx);
         }
-        let _ = Self::stop_approach(&s.w, &mut s.vel, st, nrm, self.mu);
+        once(&s.w, &mut s.vel);
     }
 
     fn positions(ids: [u32; 4], f: impl Fn(usize) -> DVec3) -> [DVec3; 4] {
@@ -1314,8 +1305,11 @@ impl Ctx<'_> {
     fn restrain_held(&self, s: &mut Scratch, slot: usize) -> f64 {
         let held = &mut s.held[slot];
         let (st, nrm) = (held.st, held.nrm);
-        let by = Self::restrain(&s.w, &mut s.u, &s.u0, &st, nrm, self.mu, &mut held.u);
-        let end = Self::restrain(&s.w, &mut s.vel, &s.vel0, &st, nrm, self.mu, &mut held.vel);
+        // What the step made the pair separate at, in each field: no faster after.
+        let cap = |start: &[DVec3]| Self::relative(&st, start).dot(nrm).max(0.0);
+        let (cap_u, cap_vel) = (cap(&s.u0), cap(&s.vel0));
+        let by = Self::restrain(&s.w, &mut s.u, cap_u, &st, nrm, self.mu, &mut held.u);
+        let end = Self::restrain(&s.w, &mut s.vel, cap_vel, &st, nrm, self.mu, &mut held.vel);
         if by > 0.0 {
             s.touch(&st.idx);
         } else if end > 0.0 {
@@ -1328,8 +1322,9 @@ impl Ctx<'_> {
     /// temporal coherence*, GDC 2005) on the pair's relative velocity in `field` (average or
     /// end velocities), `held` being what the pair's impulses changed it by so far this pass,
     /// along `nrm` and across it. Along the normal: an approaching pair stops; one separating
-    /// faster than the step made it (`start`; other pairs' impulses on particles it shares)
-    /// is brought back towards that, but only by undoing its own pushes, so over the pass a
+    /// faster than `cap` (what the step made it separate at; other pairs' impulses on
+    /// particles it shares) is brought back towards that, but only by undoing its own
+    /// pushes, so over the pass a
     /// pair only ever pushes. Across it, friction stops the relative velocity as far as
     /// Coulomb allows, within μ times the pair's push so far, so sweeps that undo and redo a
     /// push give no fresh friction. What a pair's impulses add up to over the pass is so one
@@ -1338,7 +1333,7 @@ impl Ctx<'_> {
     fn restrain(
         w: &[f64],
         field: &mut [DVec3],
-        start: &[DVec3],
+        cap: f64,
         st: &Stencil,
         nrm: DVec3,
         mu: f64,
@@ -1346,7 +1341,6 @@ impl Ctx<'_> {
     ) -> f64 {
         let vr = Self::relative(st, field);
         let vn = vr.dot(nrm);
-        let cap = Self::relative(st, start).dot(nrm).max(0.0);
         let dn = if vn < 0.0 {
             -vn
         } else if vn > cap {
