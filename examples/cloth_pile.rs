@@ -8,6 +8,7 @@
 //! cargo run --release --example cloth_pile -- --bodies    # the pile as three bodies only
 //! cargo run --release --example cloth_pile -- --bench --only 64   # the 64² rows only (or 32)
 //! cargo run --release --example cloth_pile -- --bench --threads 2 # kernels on 2 threads (default 1)
+//! cargo run --release --example cloth_pile -- --faces     # colliders against triangles: cost
 //! cargo run --release --example cloth_pile -- --detail 3  # drawn 3× finer (SurfaceDetail)
 //! ```
 //!
@@ -36,6 +37,10 @@ fn main() {
     if argv.iter().any(|a| a == "--bodies") {
         // The separate-bodies row alone (`PER_FRAME=1`: each group pass's cost on stderr).
         bench_bodies(180);
+        return;
+    }
+    if argv.iter().any(|a| a == "--faces") {
+        bench_faces();
         return;
     }
     if argv.iter().any(|a| a == "--bench") {
@@ -188,6 +193,74 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
     }
     if only.is_none() {
         bench_bodies(frames as u32);
+    }
+}
+
+/// What the colliders' test of the surface's triangles costs (`Collider::resolve_faces`):
+/// the pile's cloths without self-collision, over its 0.3 m sphere and over a box of the same
+/// size in its place, with the triangles tested (as built) and with the particles alone
+/// (`ParticleModel::contact_faces` emptied), one thread, 30 frames (64², the fall onto the
+/// collider) or 60 (3 × 32²).
+fn bench_faces() {
+    println!("colliders against triangles, {PRECISION}, one thread");
+    println!(
+        "| collider | scene | method | frames | triangles tested: µs per step | particles alone: µs per step |"
+    );
+    println!("| --- | --- | --- | ---: | ---: | ---: |");
+    let se = IntegratorKind::SymplecticEuler;
+    let lie = IntegratorKind::LinearlyImplicitEuler;
+    for boxed in [false, true] {
+        for (cloths, n, method, frames) in [(1, 64, se, 30), (3, 32, se, 60), (1, 64, lie, 30)] {
+            let mut cells = vec![];
+            for faces in [true, false] {
+                let mut p = ClothPileParams {
+                    cloths,
+                    ..Default::default()
+                }
+                .with_resolution(n);
+                p.self_collision = None;
+                let mut scene = cloth_pile(&p).expect("valid pile");
+                if boxed {
+                    let r = p.radius;
+                    scene.colliders[1].shape = ShapeDesc::Cuboid {
+                        half_extents: [r, r, r],
+                    };
+                }
+                let (mut model, state) = scene.build().expect("valid scene");
+                if !faces {
+                    model.contact_faces.clear();
+                }
+                let h = if method == se {
+                    p.stable_step()
+                } else {
+                    1.0 / 60.0
+                };
+                let config = DriverConfig {
+                    integrator: method,
+                    policy: StepPolicy::Fixed { h },
+                    frame_dt: 1.0 / 60.0,
+                    ..Default::default()
+                };
+                let mut sim = Simulation::new(model, state, config);
+                let (mut wall, mut steps) = (Duration::ZERO, 0u64);
+                bevy_soft_body::core::kernels::with_threads(1, || {
+                    for _ in 0..frames {
+                        let t = Instant::now();
+                        let rep = sim.advance_frame().expect("stable");
+                        wall += t.elapsed();
+                        steps += rep.substeps as u64;
+                    }
+                });
+                cells.push(wall.as_secs_f64() * 1e6 / steps as f64);
+            }
+            println!(
+                "| {} | {cloths} × {n}² | {} | {frames} | {:.0} | {:.0} |",
+                if boxed { "box" } else { "sphere" },
+                method.label(),
+                cells[0],
+                cells[1]
+            );
+        }
     }
 }
 

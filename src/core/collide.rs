@@ -136,6 +136,8 @@ enum Fast {
     Sphere(Scalar),
     /// The half-space's normal in the collider's frame.
     Plane(Vector),
+    /// A box's half extents (parry's precision).
+    Cuboid(glam::Vec3),
     General,
 }
 
@@ -335,6 +337,8 @@ impl Collider {
             Fast::Sphere(b.radius as Scalar)
         } else if let Some(h) = shape.as_halfspace() {
             Fast::Plane(h.normal.to_scalar())
+        } else if let Some(c) = shape.as_cuboid() {
+            Fast::Cuboid(c.half_extents)
         } else {
             Fast::General
         };
@@ -435,10 +439,43 @@ impl Collider {
                     None
                 }
             }
+            Fast::Cuboid(half) => {
+                // parry's projection onto a box, in its frame (in `f32` as parry's): clamped
+                // from outside, to the nearest face from inside (or on it).
+                let local = pose.rotation.inverse() * (p - c).to_f32();
+                let out = local.abs() - half;
+                let (q, n) = if out.max_element() > 0.0 {
+                    let q = local.clamp(-half, half);
+                    let d = local - q;
+                    let dist = d.length();
+                    if dist as Scalar >= thick || dist <= 1e-9 {
+                        return None;
+                    }
+                    (q, d / dist)
+                } else {
+                    let axis = if out.x >= out.y && out.x >= out.z {
+                        0
+                    } else if out.y >= out.z {
+                        1
+                    } else {
+                        2
+                    };
+                    let sign = if local[axis] < 0.0 { -1.0 } else { 1.0 };
+                    let mut q = local;
+                    q[axis] = sign * half[axis];
+                    let mut n = glam::Vec3::ZERO;
+                    n[axis] = sign;
+                    (q, n)
+                };
+                let n = (pose.rotation * n).to_scalar();
+                Some((c + (pose.rotation * q).to_scalar() + n * thick, n))
+            }
             Fast::General => {
                 let pose = Pose3::from_parts(c.to_f32(), pose.rotation);
                 let pf = p.to_f32();
-                let proj = self.shape.project_point(&pose, pf, true);
+                // Not `solid`: a point inside is its own projection then, and its way out
+                // would be lost.
+                let proj = self.shape.project_point(&pose, pf, false);
                 let d = pf - proj.point;
                 let dist = d.length();
                 if proj.is_inside {
@@ -507,6 +544,11 @@ impl Collider {
             Fast::Plane(_) => (p - pose.origin).dot(pose.normal) >= thick,
             Fast::Sphere(r) if pose.omega == Vector::ZERO => {
                 let reach = r + thick + (v - pose.velocity).length() * h;
+                (p - pose.origin).length_squared() > reach * reach * 1.0001
+            }
+            // A box not turning: beyond the sphere around it, by as much.
+            Fast::Cuboid(half) if pose.omega == Vector::ZERO => {
+                let reach = half.length() as Scalar + thick + (v - pose.velocity).length() * h;
                 (p - pose.origin).length_squared() > reach * reach * 1.0001
             }
             _ => false,
@@ -708,6 +750,550 @@ impl Collider {
     }
 }
 
+impl Collider {
+    /// Whether contact at the particles alone could let this collider come closer than half
+    /// its thickness to the inside of a surface triangle whose edges are at most `edge` long
+    /// while each of its corners is held at the thickness: only then need the triangles be
+    /// tested ([`Collider::resolve_faces`]). Every point of such a triangle lies within
+    /// `edge/√3` of a corner (the equilateral triangle's centre is the farthest).
+    ///
+    /// - A half-space: never (the distance to it is affine along a triangle, least at a
+    ///   corner).
+    /// - A sphere of radius `R`, thickness `t`: the triangle's plane, at `d` from the centre,
+    ///   meets the shell of radius `s = R + t` in a circle that the triangle's corners lie on
+    ///   or outside of, so a point of the triangle nearer the centre than `s` lies within
+    ///   `√(s² − d²) ≤ edge/√3` of the plane's foot, and the triangle comes no nearer than
+    ///   `√(s² − edge²/3)`. That is at least `R + t/2` unless `edge² > 3t(R + ¾t)`: a cloth
+    ///   whose cells are small against the sphere needs its particles alone. A capsule's
+    ///   round ends are such spheres, and along its side the strip a triangle crosses is
+    ///   spanned by an edge (half-width at most `edge/2`): the same test with its radius.
+    /// - Any other shape may have an edge or a corner as sharp as a knife: the distance is
+    ///   1-Lipschitz, so a triangle comes no nearer than `t − edge/√3`, at least `t/2`
+    ///   unless `edge > (√3/2) t`.
+    pub fn needs_faces(&self, edge: Scalar) -> bool {
+        let t = self.material.thickness as Scalar;
+        let round = |r: Scalar| edge * edge > 3.0 * t * (r + 0.75 * t);
+        match self.fast {
+            Fast::Plane(_) => false,
+            Fast::Sphere(r) => round(r),
+            Fast::Cuboid(_) => edge > 0.5 * (3.0 as Scalar).sqrt() * t,
+            Fast::General => match self.shape.as_capsule() {
+                Some(c) => round(c.radius as Scalar),
+                None => edge > 0.5 * (3.0 as Scalar).sqrt() * t,
+            },
+        }
+    }
+
+    /// Contact between the surface's triangles `faces` and the collider at the end `t` of a
+    /// step of length `h`, after the particles' own ([`Collider::resolve`]): a triangle
+    /// whose closest point to the collider is nearer than its thickness is pushed out along
+    /// the contact normal, its corners moved in proportion to their barycentric weights and
+    /// inverse masses so that the closest point itself reaches the thickness, and the
+    /// point's velocity relative to the collider's surface loses its approach (with the
+    /// collider's restitution) and is held by Coulomb friction, as one impulse of the
+    /// triangle's effective mass `1 / Σ bᵢ² wᵢ` (Bridson, Fedkiw and Anderson, *Robust
+    /// treatment of collisions, contact and friction for cloth animation*, 2002, §7.1: the
+    /// impulse at a point of a triangle). A collider with a [`Response`] takes the impulse
+    /// back as for a particle. Triangles in turn (Gauss–Seidel), on the caller.
+    ///
+    /// A triangle whose corners moved relative to the collider by more than the thickness in
+    /// the step is also tested at the step's start (its corners back by `h` times their
+    /// velocities, as [`Collider::resolve`]'s swept test takes them): when the direction
+    /// from the collider to the triangle's nearest point turned by more than a right angle
+    /// over the step, the collider passed through it (a rod between a cloth's particles in
+    /// one frame-long step), and the triangle is put back on the side it came from, past the
+    /// collider's extreme point that way by the thickness.
+    ///
+    /// `edge` bounds the triangles' edges (see [`Collider::needs_faces`]: when the
+    /// particles' contact suffices for triangles that long, nothing is tested). Returns the
+    /// number of triangles pushed.
+    #[allow(clippy::too_many_arguments)]
+    pub fn resolve_faces(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        faces: &[[u32; 3]],
+        edge: Scalar,
+        x0: &[Vector],
+        x: &mut [Vector],
+        v: &mut [Vector],
+        inv_mass: &[Scalar],
+        near: &mut Vec<(u32, Vector)>,
+    ) -> usize {
+        near.clear();
+        if faces.is_empty() || !self.needs_faces(edge) {
+            return 0;
+        }
+        let pose = self.pose(t);
+        let before = self.pose(t - h);
+        let thick = self.material.thickness as Scalar;
+        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        let shape_before = Pose3::from_parts(before.origin.to_f32(), before.rotation);
+        let clear = self.face_filter(&pose, &shape_pose, thick, edge);
+        let mut body = self.response.as_ref().map(|r| {
+            let ex = r.exchange.lock().unwrap_or_else(|e| e.into_inner());
+            let (j0, l0) = (ex.linear, ex.angular);
+            (r, ex, j0, l0)
+        });
+        let n = x.len().min(x0.len()).min(v.len()).min(inv_mass.len());
+        let corners = |f: &[u32; 3]| {
+            let ids = f.map(|i| i as usize);
+            let w = ids.map(|i| inv_mass[i]);
+            (ids[0].max(ids[1]).max(ids[2]) < n && w != [0.0; 3]).then_some((ids, w))
+        };
+        // The farthest any particle moved relative to the collider: features farther than
+        // twice that (and the thickness) are skipped before their own travel is measured.
+        let moved = |x: &[Vector], i: usize| {
+            (x[i] - x0[i] - Self::surface_velocity(&pose, x[i]) * h).length_squared()
+        };
+        let fastest = (0..n).map(|i| moved(x, i)).fold(0.0, Scalar::max).sqrt();
+        let grow = if fastest > thick { 2.0 * fastest } else { 0.0 };
+        // A round shape's bound holds over the step too (see `feature_held`): told first, on
+        // the positions alone.
+        let round = match self.fast {
+            Fast::Sphere(_) => true,
+            Fast::General => self.shape.as_capsule().is_some(),
+            _ => false,
+        };
+        let mut pushed = 0;
+        for (k, f) in faces.iter().enumerate() {
+            // At the end of a step the triangles cover their edges; an edge is tested for
+            // itself only when it may have passed through the collider.
+            let edge = f[1] == f[2];
+            if edge && grow == 0.0 {
+                continue;
+            }
+            let ids = f.map(|i| i as usize);
+            if ids[0].max(ids[1]).max(ids[2]) >= n {
+                continue;
+            }
+            let tri = ids.map(|i| x[i]);
+            if clear(tri, grow) || round && self.feature_held(&pose, thick, tri, None) {
+                continue;
+            }
+            let Some((ids, w)) = corners(f) else { continue };
+            let travel = ids
+                .map(|i| moved(x, i))
+                .into_iter()
+                .fold(0.0, Scalar::max)
+                .sqrt();
+            let swept = travel > thick;
+            if !swept && edge {
+                continue;
+            }
+            let reach = if swept { thick + 2.0 * travel } else { thick };
+            let then = swept.then(|| (&before, ids.map(|i| x0[i])));
+            if clear(tri, reach - thick) || !round && self.feature_held(&pose, thick, tri, then) {
+                continue;
+            }
+            let Some((bary, point, mut nrm, dist)) =
+                self.face_contact(&pose, &shape_pose, reach, tri)
+            else {
+                continue;
+            };
+            let mut depth = thick - dist;
+            if swept {
+                // A triangle farther than `reach` at the start cannot be within the thickness
+                // now (it came at most `travel` closer).
+                let start = ids.map(|i| x0[i]);
+                let Some((_, _, n0, _)) = self.face_contact(&before, &shape_before, reach, start)
+                else {
+                    continue;
+                };
+                match self.back(&shape_pose, thick, (point, nrm, dist), n0) {
+                    Some(Some(back)) => (nrm, depth) = back,
+                    Some(None) => {}
+                    None => continue,
+                }
+            }
+            near.push((k as u32, nrm));
+            if depth > 0.0 {
+                pushed += usize::from(self.face_response(
+                    &pose,
+                    &mut body,
+                    t,
+                    ids,
+                    w,
+                    (bary, point, nrm, depth),
+                    x,
+                    v,
+                ));
+            }
+        }
+        // Triangles sharing corners push each other back in (a cloth wrapped round a rod
+        // pulls on both sides): Gauss–Seidel sweeps over the triangles met, until none is
+        // short of the thickness by more than a hundredth of it.
+        for _ in 1..FACE_SWEEPS {
+            let mut worst: Scalar = 0.0;
+            for &(k, side) in near.iter() {
+                let Some((ids, w)) = corners(&faces[k as usize]) else {
+                    continue;
+                };
+                let tri = ids.map(|i| x[i]);
+                // Looked at up to several thicknesses away: a triangle pushed through by its
+                // neighbours goes back to the side it was on.
+                let Some((bary, point, mut nrm, dist)) =
+                    self.face_contact(&pose, &shape_pose, 4.0 * thick, tri)
+                else {
+                    continue;
+                };
+                let mut depth = thick - dist;
+                match self.back(&shape_pose, thick, (point, nrm, dist), side) {
+                    Some(Some(back)) => (nrm, depth) = back,
+                    Some(None) => {}
+                    None => continue,
+                }
+                worst = worst.max(depth);
+                if depth > 0.0 {
+                    self.face_response(
+                        &pose,
+                        &mut body,
+                        t,
+                        ids,
+                        w,
+                        (bary, point, nrm, depth),
+                        x,
+                        v,
+                    );
+                }
+            }
+            if worst <= 0.01 * thick {
+                break;
+            }
+        }
+        pushed
+    }
+
+    /// Which way a feature in contact `(point, normal, dist)` goes back out of the collider
+    /// (at `shape_pose`), given the side it came from: the direction from the collider to it
+    /// at the step's start, `side`. A feature whose nearest direction turned past a right
+    /// angle went through: it goes back along `side`, the thickness past the collider's
+    /// extreme point that way. One inside the collider (a rod through a triangle) goes out
+    /// along the contact normal or that way, whichever is the shorter push: the penetration
+    /// depth of a flat feature may point along its plane, and triangles on either side of
+    /// the rod would then push their shared corners back and forth. `Some(None)`: as it is;
+    /// `None`: the collider has no extreme point to go by.
+    #[allow(clippy::type_complexity)]
+    fn back(
+        &self,
+        shape_pose: &Pose3,
+        thick: Scalar,
+        (point, nrm, dist): (Vector, Vector, Scalar),
+        side: Vector,
+    ) -> Option<Option<(Vector, Scalar)>> {
+        let through = nrm.dot(side) < 0.0;
+        if !through && dist >= 0.0 {
+            return Some(None);
+        }
+        let far = self
+            .shape
+            .as_support_map()?
+            .support_point(shape_pose, side.to_f32())
+            .to_scalar();
+        let d = thick - (point - far).dot(side);
+        Some((through || d < thick - dist).then_some((side, d)))
+    }
+
+    /// One triangle's response to its contact `(bary, point, normal, depth)` (see
+    /// [`Collider::resolve_faces`]): false when its corners cannot move.
+    #[allow(clippy::too_many_arguments, clippy::type_complexity)]
+    fn face_response(
+        &self,
+        pose: &Pose,
+        body: &mut Option<(
+            &Response,
+            std::sync::MutexGuard<'_, Exchange>,
+            Vector,
+            Vector,
+        )>,
+        t: Scalar,
+        ids: [usize; 3],
+        w: [Scalar; 3],
+        (bary, point, nrm, depth): ([Scalar; 3], Vector, Vector, Scalar),
+        x: &mut [Vector],
+        v: &mut [Vector],
+    ) -> bool {
+        let mu = self.material.friction as Scalar;
+        let denom: Scalar = (0..3).map(|k| bary[k] * bary[k] * w[k]).sum();
+        if denom.is_nan() || denom <= 0.0 {
+            return false;
+        }
+        // A corner moves `bᵢ wᵢ / Σ bⱼ² wⱼ` times as far as the point (at most 1.21 times when
+        // the corners weigh the same; without bound as the point nears a pinned corner): a
+        // point carried less than half by free corners is pushed only as far as keeps each
+        // corner within twice the push, and its impulse scaled alike (a fraction of an
+        // inelastic impulse adds no energy either).
+        let lever = (0..3)
+            .map(|k| bary[k] * w[k] / denom)
+            .fold(0.0, Scalar::max);
+        let part = (LEVER / lever).min(1.0);
+        for (k, &i) in ids.iter().enumerate() {
+            x[i] += nrm * (part * depth * bary[k] * w[k] / denom);
+        }
+        let vp = v[ids[0]] * bary[0] + v[ids[1]] * bary[1] + v[ids[2]] * bary[2];
+        // Gauss–Seidel: the contacts before this one already pushed the body.
+        let (vb, wb) = match body {
+            Some((r, ex, j0, l0)) => (
+                pose.velocity + (ex.linear - *j0) * r.inv_mass,
+                pose.omega + r.inv_inertia_mul(ex.angular - *l0),
+            ),
+            None => (pose.velocity, pose.omega),
+        };
+        let arm = point - pose.center;
+        let vc = if wb == Vector::ZERO {
+            vb
+        } else {
+            vb + wb.cross(arm)
+        };
+        let rel = vp - vc;
+        let vn = rel.dot(nrm);
+        if vn >= 0.0 {
+            return true;
+        }
+        let dynamic = body.as_ref().map(|(r, ..)| *r);
+        let along = |d: Vector| dynamic.map_or(0.0, |r| r.inverse_mass_along(arm, d));
+        let e = self.restitution_for(vn);
+        let jn = -(1.0 + e) * vn / (denom + along(nrm));
+        let vt = rel - nrm * vn;
+        let vt_len = vt.length();
+        let mut impulse = nrm * jn;
+        if vt_len > 0.0 && mu > 0.0 {
+            let tdir = vt / vt_len;
+            let jt = (mu * jn).min(vt_len / (denom + along(tdir)));
+            impulse -= tdir * jt;
+        }
+        impulse *= part;
+        for (k, &i) in ids.iter().enumerate() {
+            v[i] += impulse * (bary[k] * w[k]);
+        }
+        if let Some((r, ex, ..)) = body {
+            let tau = t - r.t0;
+            let torque = arm.cross(impulse);
+            ex.linear -= impulse;
+            ex.angular -= torque;
+            ex.linear_moment -= impulse * tau;
+            ex.angular_moment -= torque * tau;
+            ex.contacts += 1;
+        }
+        true
+    }
+
+    /// [`Collider::touching`] for the surface's triangles `faces` (edges at most `edge`
+    /// long) where the collider needs them ([`Collider::needs_faces`]): marks in `out` the
+    /// corners of each triangle within the thickness plus `slack` of it at time `t`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn touching_faces(
+        &self,
+        t: Scalar,
+        slack: Scalar,
+        faces: &[[u32; 3]],
+        edge: Scalar,
+        x: &[Vector],
+        out: &mut [bool],
+    ) {
+        if faces.is_empty() || !self.needs_faces(edge) {
+            return;
+        }
+        let pose = self.pose(t);
+        let thick = self.material.thickness as Scalar + slack;
+        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        let clear = self.face_filter(&pose, &shape_pose, thick, edge);
+        let n = x.len().min(out.len());
+        for f in faces {
+            let [a, b, c] = f.map(|i| i as usize);
+            if a.max(b).max(c) >= n || out[a] && out[b] && out[c] {
+                continue;
+            }
+            let tri = [x[a], x[b], x[c]];
+            if !clear(tri, 0.0)
+                && !self.feature_held(&pose, thick, tri, None)
+                && self.face_contact(&pose, &shape_pose, thick, tri).is_some()
+            {
+                out[a] = true;
+                out[b] = true;
+                out[c] = true;
+            }
+        }
+    }
+
+    /// Whether feature `tri` (a triangle, or an edge `[a, b, b]`) needs no test because its
+    /// corners, held at `thick` or farther by the particles' contact, keep it there (the
+    /// per-feature form of [`Collider::needs_faces`]'s bounds, with the feature's own longest
+    /// edge `e`):
+    ///
+    /// - a sphere or a capsule of radius `ρ`: `e² ≤ 3t(ρ + ¾t)`. Over the step too: its
+    ///   corners stay out of the shape itself along their paths (the particles' swept test),
+    ///   and the feature then dips into it by at most about `t/2`, never through;
+    /// - a box: all corners in one face's region (the distance is affine there, least at a
+    ///   corner), at the step's start as well when `then` gives it (the region is convex, so
+    ///   the corners stay in it along their straight paths); or, at the end only, the
+    ///   nearest corner farther than `t + e/√3` (the distance is 1-Lipschitz, and every
+    ///   point of the feature lies within `e/√3` of a corner).
+    fn feature_held(
+        &self,
+        pose: &Pose,
+        thick: Scalar,
+        tri: [Vector; 3],
+        then: Option<(&Pose, [Vector; 3])>,
+    ) -> bool {
+        let e2 = tri[0]
+            .distance_squared(tri[1])
+            .max(tri[1].distance_squared(tri[2]))
+            .max(tri[2].distance_squared(tri[0]));
+        let round = |r: Scalar| e2 <= 3.0 * thick * (r + 0.75 * thick);
+        match self.fast {
+            Fast::Plane(_) => true,
+            Fast::Sphere(r) => round(r),
+            Fast::General => self
+                .shape
+                .as_capsule()
+                .is_some_and(|c| round(c.radius as Scalar)),
+            Fast::Cuboid(half) => {
+                // Each corner's face region (the axis it is out along and on which side), if
+                // it is out along one axis only, and its distance from the box.
+                let region = |pose: &Pose, p: Vector| {
+                    let local = pose.rotation.inverse() * (p - pose.origin).to_f32();
+                    let out = local.abs() - half;
+                    let outside = out.cmpgt(glam::Vec3::ZERO).bitmask();
+                    let side = local.cmpgt(glam::Vec3::ZERO).bitmask() & outside;
+                    let face = (outside.count_ones() == 1).then_some((outside, side));
+                    (face, out.max(glam::Vec3::ZERO).length() as Scalar)
+                };
+                let (first, mut nearest) = region(pose, tri[0]);
+                let mut one = first.is_some();
+                for p in &tri[1..] {
+                    let (face, d) = region(pose, *p);
+                    one &= face == first;
+                    nearest = nearest.min(d);
+                }
+                match then {
+                    Some((before, start)) => {
+                        one && start.iter().all(|&p| region(before, p).0 == first)
+                    }
+                    None => one || nearest > thick + e2.sqrt() / (3.0 as Scalar).sqrt(),
+                }
+            }
+        }
+    }
+
+    /// A test that a triangle is certainly farther than `thick` and its second argument from
+    /// the collider (at `pose`, edges at most `edge`), told cheaply: a sphere's centre farther
+    /// from a corner than the sphere, that distance and the edge bound; any other shape's box
+    /// (grown by that distance) missing the triangle's.
+    fn face_filter(
+        &self,
+        pose: &Pose,
+        shape_pose: &Pose3,
+        thick: Scalar,
+        edge: Scalar,
+    ) -> impl Fn([Vector; 3], Scalar) -> bool + use<> {
+        let aabb = self.shape.compute_aabb(shape_pose);
+        let grow = glam::Vec3::splat(thick as f32);
+        let (lo, hi) = (
+            (aabb.mins - grow).to_scalar(),
+            (aabb.maxs + grow).to_scalar(),
+        );
+        let (centre, reach) = match self.fast {
+            Fast::Sphere(r) => (pose.origin, r + thick + edge),
+            _ => (Vector::ZERO, Scalar::INFINITY),
+        };
+        move |[pa, pb, pc]: [Vector; 3], more: Scalar| {
+            if reach.is_finite() {
+                (pa - centre).length_squared() > (reach + more) * (reach + more)
+            } else {
+                let m = Vector::splat(more);
+                (pa.min(pb).min(pc) - m).cmpgt(hi).any() || (pa.max(pb).max(pc) + m).cmplt(lo).any()
+            }
+        }
+    }
+
+    /// The closest point of triangle `tri` to the collider (at `pose`) when nearer than
+    /// `reach`: its barycentric weights, the point, the unit normal out of the collider
+    /// towards it, and its distance from the collider's surface (negative inside).
+    fn face_contact(
+        &self,
+        pose: &Pose,
+        shape_pose: &Pose3,
+        reach: Scalar,
+        tri: [Vector; 3],
+    ) -> Option<([Scalar; 3], Vector, Vector, Scalar)> {
+        // parry's queries assert on non-finite input, and in `f32` a corner 10¹⁹ m away
+        // squares past the largest float: a triangle reaching 10 km from the collider is a
+        // diverging body's, left to the divergence check.
+        if !tri
+            .iter()
+            .all(|&p| p.is_finite() && (p - pose.origin).abs().max_element() < FAR_FEATURE)
+        {
+            return None;
+        }
+        let d = |p: Vector| glam::DVec3::from_array(p.to_f64());
+        let bary_of = |p: Vector| {
+            let b = crate::core::self_contact::closest_on_triangle(
+                d(p),
+                d(tri[0]),
+                d(tri[1]),
+                d(tri[2]),
+            );
+            b.map(|x| x as Scalar)
+        };
+        match self.fast {
+            Fast::Plane(_) => None,
+            Fast::Sphere(r) => {
+                let bary = bary_of(pose.origin);
+                let q = tri[0] * bary[0] + tri[1] * bary[1] + tri[2] * bary[2];
+                let off = q - pose.origin;
+                let dist = off.length();
+                if dist.is_nan() || dist >= r + reach {
+                    return None;
+                }
+                // The centre on the triangle: out along its normal.
+                let n = if dist > 0.0 {
+                    off / dist
+                } else {
+                    (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero()
+                };
+                (n != Vector::ZERO).then_some((bary, q, n, dist - r))
+            }
+            Fast::Cuboid(_) | Fast::General => {
+                let [a, b, c] = tri.map(|p| p.to_f32());
+                // An edge, `[a, b, b]`, is a segment (a flat triangle's penetration is not).
+                let feature: &dyn parry3d::shape::Shape = if tri[1] == tri[2] {
+                    &parry3d::shape::Segment::new(a, b)
+                } else {
+                    &parry3d::shape::Triangle::new(a, b, c)
+                };
+                let c = parry3d::query::contact(
+                    &Pose3::IDENTITY,
+                    feature,
+                    shape_pose,
+                    &*self.shape,
+                    reach as f32,
+                )
+                .ok()
+                .flatten()?;
+                let dist = c.dist as Scalar;
+                let n = (-c.normal1).to_scalar();
+                let point = c.point1.to_scalar();
+                if dist.is_nan() || dist >= reach || !n.is_finite() || !point.is_finite() {
+                    return None;
+                }
+                Some((bary_of(point), point, n, dist))
+            }
+        }
+    }
+}
+
+/// How far from a collider's origin a feature's corner may be for the feature to be tested
+/// against it (m): see [`Collider::resolve_faces`].
+const FAR_FEATURE: Scalar = 1e4;
+
+/// How many times as far as a feature's contact point one of its corners may be pushed (see
+/// [`Collider::resolve_faces`]).
+const LEVER: Scalar = 2.0;
+
+/// Gauss–Seidel sweeps of [`Collider::resolve_faces`] over the triangles it met, at most.
+pub const FACE_SWEEPS: u32 = 32;
+
 /// Particles a chunk of [`resolve_all`] holds on the team (about ten microseconds of work
 /// against a sphere and the ground; smaller under Miri).
 const RESOLVE_CHUNK: usize = crate::core::kernels::chunk_limit(512, 64);
@@ -888,5 +1474,286 @@ mod tests {
                 "{clear} of {far} without contact called clear"
             );
         }
+    }
+
+    /// [`Collider::needs_faces`]'s bound for a sphere: a triangle with edges at most `e`
+    /// whose corners are at least `s = R + t` from the centre comes no nearer than
+    /// `√(s² − e²/3)`. Over random triangles around the tight case (an equilateral one
+    /// centred over the centre with its corners on the shell), none comes nearer, and some
+    /// come within half a millimetre of it (of the 6 cm shell: the bound is nearly attained).
+    #[test]
+    fn a_triangle_with_its_corners_off_a_sphere_keeps_the_bound_needs_faces_takes() {
+        let mut rng = crate::math::test_rng(0x9e37_79b9_7f4a_7c15u64);
+        let mut rnd = move || rng();
+        let (r, t) = (0.05f64, 0.01f64);
+        let s = r + t;
+        let mut tightest = f64::INFINITY;
+        let mut kept = 0;
+        for _ in 0..50_000 {
+            let e = 0.02 + 0.08 * rnd().abs();
+            let d = (s * s - e * e / 3.0).sqrt() * (1.0 + 0.02 * rnd());
+            let n = glam::DVec3::new(rnd(), rnd(), rnd()).normalize();
+            let u = n.any_orthonormal_vector();
+            let w = n.cross(u);
+            let turn = std::f64::consts::PI * rnd();
+            let mut corner = |k: f64| {
+                let a = turn + k * 2.0 * std::f64::consts::PI / 3.0;
+                let jitter = glam::DVec3::new(rnd(), rnd(), rnd()) * (0.05 * e);
+                n * d + (u * a.cos() + w * a.sin()) * (e / 3f64.sqrt()) + jitter
+            };
+            let tri = [corner(0.0), corner(1.0), corner(2.0)];
+            let longest = (0..3)
+                .map(|k| tri[k].distance(tri[(k + 1) % 3]))
+                .fold(0.0, f64::max);
+            if tri.iter().any(|c| c.length() < s) {
+                continue;
+            }
+            kept += 1;
+            let b = crate::core::self_contact::closest_on_triangle(
+                glam::DVec3::ZERO,
+                tri[0],
+                tri[1],
+                tri[2],
+            );
+            let q = tri[0] * b[0] + tri[1] * b[1] + tri[2] * b[2];
+            let bound = (s * s - longest * longest / 3.0).max(0.0).sqrt();
+            assert!(q.length() >= bound - 1e-12, "{} under {bound}", q.length());
+            tightest = tightest.min(q.length() - bound);
+        }
+        assert!(
+            kept > 1000 && tightest < 5e-4,
+            "{kept} kept, tightest {tightest}"
+        );
+    }
+
+    /// The triangles' impulses against a still collider never add kinetic energy (inelastic,
+    /// friction within Coulomb's cone, each of the triangle's effective mass), and against a
+    /// dynamic body they conserve momentum: what the particles gain, the body's exchange
+    /// records as lost, and the particles' and the body's kinetic energy together never rise.
+    /// Random triangles of random masses (some pinned) moving at random into a sphere and a
+    /// box.
+    #[test]
+    fn face_impulses_keep_momentum_and_never_add_kinetic_energy() {
+        let mut rng = crate::math::test_rng(0x1234_5678_9abc_def1u64);
+        let mut rnd = move || rng() as Scalar;
+        let material = ContactMaterial {
+            thickness: 0.01,
+            friction: 0.6,
+            restitution: 0.0,
+            ..Default::default()
+        };
+        let inertia = [Vector::X * 40.0, Vector::Y * 25.0, Vector::Z * 30.0];
+        let shapes = [SharedShape::ball(0.1), SharedShape::cuboid(0.1, 0.05, 0.2)];
+        let (mut pushed, mut near) = (0, vec![]);
+        for shape in &shapes {
+            for dynamic in [false, true] {
+                for _ in 0..400 {
+                    let mut c = Collider::new(
+                        shape.clone(),
+                        Motion::Fixed { position: [0.0; 3] },
+                        Rot3::IDENTITY,
+                        material,
+                    );
+                    if dynamic {
+                        c = c.with_response(Response::new(2.0, inertia, 0.0));
+                    }
+                    // A triangle of 6–20 cm edges whose middle is within 12 cm of the centre.
+                    let mid = Vector::new(rnd(), rnd(), rnd()) * 0.12;
+                    let mut x: Vec<Vector> = (0..3)
+                        .map(|_| mid + Vector::new(rnd(), rnd(), rnd()) * 0.1)
+                        .collect();
+                    let mut v: Vec<Vector> = x
+                        .iter()
+                        .map(|p| -*p * (5.0 * rnd().abs()) + Vector::new(rnd(), rnd(), rnd()))
+                        .collect();
+                    let w: Vec<Scalar> = (0..3)
+                        .map(|_| {
+                            if rnd() < -0.6 {
+                                0.0
+                            } else {
+                                1.0 / (0.01 + 0.1 * rnd().abs())
+                            }
+                        })
+                        .collect();
+                    let ke = |v: &[Vector]| -> f64 {
+                        (0..3)
+                            .filter(|&i| w[i] > 0.0)
+                            .map(|i| 0.5 * (v[i].length_squared() / w[i]) as f64)
+                            .sum()
+                    };
+                    let momentum = |v: &[Vector]| -> Vector {
+                        (0..3).filter(|&i| w[i] > 0.0).map(|i| v[i] / w[i]).sum()
+                    };
+                    // A pinned corner is still (a moving one may drive the others, as a
+                    // moving collider does).
+                    for i in 0..3 {
+                        if w[i] == 0.0 {
+                            v[i] = Vector::ZERO;
+                        }
+                    }
+                    let (k0, p0) = (ke(&v), momentum(&v));
+                    let x0: Vec<Vector> = x.iter().zip(&v).map(|(&x, &v)| x - v * 0.01).collect();
+                    pushed += c.resolve_faces(
+                        0.0,
+                        0.01,
+                        &[[0, 1, 2]],
+                        1.0,
+                        &x0,
+                        &mut x,
+                        &mut v,
+                        &w,
+                        &mut near,
+                    );
+                    let (k1, p1) = (ke(&v), momentum(&v));
+                    assert!(x.iter().chain(&v).all(|p| p.is_finite()));
+                    let (body_ke, lost) = match &c.response {
+                        Some(r) => {
+                            let ex = r.exchange();
+                            let l = ex.angular;
+                            let ke = 0.5 * (ex.linear.length_squared() * r.inv_mass) as f64
+                                + 0.5 * l.dot(r.inv_inertia_mul(l)) as f64;
+                            (ke, ex.linear)
+                        }
+                        None => (0.0, Vector::ZERO),
+                    };
+                    assert!(
+                        k1 + body_ke <= k0 * (1.0 + 1e-5) + 1e-9,
+                        "kinetic energy {k0} -> {k1} + body {body_ke}"
+                    );
+                    // A pinned corner takes its share of the impulse (infinitely heavy).
+                    if dynamic && w.iter().all(|&w| w > 0.0) {
+                        let gap = (p1 - p0 + lost).length() as f64;
+                        assert!(
+                            gap <= 1e-4 * (1.0 + p0.length() as f64),
+                            "momentum off by {gap}"
+                        );
+                    }
+                }
+            }
+        }
+        assert!(pushed > 400, "only {pushed} triangles met the colliders");
+    }
+
+    /// Hostile corners (not finite, or astronomically far) never reach parry's queries, which
+    /// assert on them: the triangles are left alone, nothing panics, nothing finite turns NaN.
+    #[test]
+    fn far_or_non_finite_corners_are_left_alone() {
+        let shapes = [
+            SharedShape::ball(0.1),
+            SharedShape::cuboid(0.1, 0.05, 0.2),
+            SharedShape::capsule_y(0.3, 0.01),
+        ];
+        let bad = [
+            Scalar::NAN,
+            Scalar::INFINITY,
+            -Scalar::INFINITY,
+            1e19,
+            -3e30,
+        ];
+        let mut near = vec![];
+        for shape in &shapes {
+            let c = Collider::new(
+                shape.clone(),
+                Motion::Fixed { position: [0.0; 3] },
+                Rot3::IDENTITY,
+                ContactMaterial::default(),
+            );
+            for &b in &bad {
+                for k in 0..3 {
+                    let mut x = vec![
+                        Vector::new(-0.05, 0.0, -0.05),
+                        Vector::new(0.05, 0.0, -0.05),
+                        Vector::new(0.0, 0.0, 0.05),
+                    ];
+                    x[k].y = b;
+                    let x0 = x.clone();
+                    let mut v = vec![Vector::new(0.0, -1.0, 0.0); 3];
+                    let w = [1.0; 3];
+                    let faces = [[0, 1, 2], [0, 1, 1], [1, 2, 2], [2, 0, 0]];
+                    c.resolve_faces(0.1, 0.01, &faces, 1.0, &x0, &mut x, &mut v, &w, &mut near);
+                    for i in (0..3).filter(|&i| i != k) {
+                        assert!(x[i].is_finite() && v[i].is_finite(), "{b} at corner {k}");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The box's own contact (its frame, clamped or to the nearest face) is parry's
+    /// projection: over random points around a turned box, in it, near it and on its faces,
+    /// the same contact or none, targets and normals within `f32` round-off.
+    #[test]
+    fn a_box_contact_is_parrys_projection() {
+        let mut rng = crate::math::test_rng(0x5151_aaaa_0f0f_1234u64);
+        let mut rnd = move || rng() as Scalar;
+        let rot = Rot3::from_scaled_axis(glam::Vec3::new(0.4, -0.7, 0.2));
+        let material = ContactMaterial {
+            thickness: 0.02,
+            ..Default::default()
+        };
+        let fast = Collider::new(
+            SharedShape::cuboid(0.3, 0.1, 0.2),
+            Motion::Fixed {
+                position: [0.5, -0.2, 0.1],
+            },
+            rot,
+            material,
+        );
+        assert!(matches!(fast.fast, Fast::Cuboid(_)));
+        let mut general = fast.clone();
+        general.fast = Fast::General;
+        let pose = fast.pose(0.0);
+        let (mut met, mut inside) = (0, 0);
+        for k in 0..20_000 {
+            let mut p = pose.origin
+                + (rot
+                    * glam::Vec3::new(
+                        0.35 * rnd() as f32,
+                        0.15 * rnd() as f32,
+                        0.25 * rnd() as f32,
+                    ))
+                .to_scalar();
+            if k % 10 == 0 {
+                // On a face.
+                let local = rot.inverse() * (p - pose.origin).to_f32();
+                let on = glam::Vec3::new(0.3 * local.x.signum(), local.y, local.z);
+                p = pose.origin + (rot * on).to_scalar();
+            }
+            let a = fast.contact(&pose, 0.02, p);
+            let b = general.contact(&pose, 0.02, p);
+            let shape_pose = Pose3::from_parts(pose.origin.to_f32(), rot);
+            let proj = fast.shape.project_point(&shape_pose, p.to_f32(), false);
+            if (proj.point - p.to_f32()).length() < 1e-5 {
+                // On a face: parry's direction is round-off; the box's is the face's normal,
+                // the point pushed the thickness along it.
+                let (ta, na) = a.expect("on the surface is in contact");
+                assert!(
+                    ((ta - p).length() - 0.02).abs() < 1e-5 && (na.length() - 1.0).abs() < 1e-5
+                );
+                continue;
+            }
+            match (a, b) {
+                (Some((ta, na)), Some((tb, nb))) => {
+                    met += 1;
+                    inside += usize::from((p - ta).dot(na) < 0.0);
+                    // A normal from a point `d` off the surface turns by the round-off over `d`.
+                    let d = (proj.point - p.to_f32()).length() as Scalar;
+                    let tol = 1e-4 + 2e-6 / d;
+                    assert!(
+                        (ta - tb).length() < 1e-5 + 0.02 * tol && (na - nb).length() < tol,
+                        "{p:?}: {a:?} {b:?}"
+                    );
+                }
+                (None, None) => {}
+                // Exactly on the surface parry may call the point either way.
+                (Some((ta, _)), None) | (None, Some((ta, _))) => {
+                    assert!((ta - p).length() <= 0.02 + 1e-5, "{p:?}: {a:?} {b:?}")
+                }
+            }
+        }
+        assert!(
+            met > 5000 && inside > 1000,
+            "{met} contacts, {inside} from inside"
+        );
     }
 }

@@ -92,8 +92,8 @@ pub struct BodyLayout {
     pub drag: f64,
     /// Wind.
     pub wind: Option<Wind>,
-    /// Surface triangles (particle indices), for contact of the surface with itself (empty: the
-    /// tets' boundary).
+    /// Surface triangles (particle indices), for contact of the surface with colliders between
+    /// its particles and with itself (empty: the tets' boundary, or none).
     pub surface: Vec<[u32; 3]>,
     /// Contact of the surface with itself (`None`: none).
     pub self_collision: Option<SelfContactParams>,
@@ -160,8 +160,8 @@ impl BodyLayout {
             .unwrap_or_else(|| distance(self.particles[s.a].position, self.particles[s.b].position))
     }
 
-    /// The triangles self-collision uses: the surface's, or the tets' boundary when the layout
-    /// has no surface.
+    /// The triangles contact uses (with colliders and with itself): the surface's, or the
+    /// tets' boundary when the layout has no surface.
     pub fn contact_triangles(&self) -> Vec<[u32; 3]> {
         if self.surface.is_empty() && !self.tets.is_empty() {
             crate::core::fem::mesh::boundary_faces(
@@ -393,10 +393,12 @@ impl BodyLayout {
         model.gravity = self.gravity.to_scalar();
         model.drag = self.drag.to_scalar();
         model.set_wind(self.wind);
+        let faces = self.contact_triangles();
         model.self_contact = self.self_collision.map(|p| {
-            let surface = ContactSurface::torn(&self.contact_triangles(), &self.torn_from);
+            let surface = ContactSurface::torn(&faces, &self.torn_from);
             SelfContact::new(surface, p)
         });
+        model.contact_faces = faces;
         for &(p, f) in &self.forces {
             model.set_external_force(p, f.to_scalar());
         }

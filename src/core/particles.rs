@@ -48,11 +48,34 @@ pub struct ParticleModel {
     pub colliders: Vec<Collider>,
     /// The surface's contact with itself (`None`: no pass, no cost).
     pub self_contact: Option<crate::core::self_contact::SelfContact>,
+    /// The surface's triangles, for colliders to touch between the particles (empty: the
+    /// particles alone touch colliders); tested only against colliders that can come between
+    /// a surface's particles, see [`Collider::needs_faces`].
+    pub contact_faces: Vec<[u32; 3]>,
+    /// The longest edge of [`ParticleModel::contact_faces`] at the frame's start, times
+    /// [`FACE_EDGE_GROWTH`] (infinite until measured).
+    face_edge: Scalar,
+    /// The features colliders touch between the particles: [`ParticleModel::contact_faces`],
+    /// then each of their edges once, as a triangle `[a, b, b]` (see
+    /// [`Collider::resolve_faces`]); made from `features_for`, a copy of the faces they were
+    /// made from.
+    features: Vec<[u32; 3]>,
+    features_for: Vec<[u32; 3]>,
+    /// The particles' positions at the step's start, for the features' swept test.
+    face_start: Vec<Vector>,
+    /// The features the last collider's face contact met (reused: a step allocates nothing).
+    faces_near: Vec<(u32, Vector)>,
     /// Whether the last fused symplectic Euler step found the particles it wrote finite.
     swept: SweptCheck,
     /// Whether the pins are known to hold in a state.
     pins_held: PinsHeld,
 }
+
+/// How much longer than at the frame's start a surface triangle's edge is taken to grow
+/// within the frame, for the test of which colliders need the triangles
+/// ([`Collider::needs_faces`]): an edge stretched further than this within one frame (a
+/// tearing cloth's) may let a round collider as far into the surface as between particles.
+pub const FACE_EDGE_GROWTH: Scalar = 1.5;
 
 /// What the model knows of its pins in one state (told apart by its positions' address):
 /// nothing, written there by [`OdeSystem::apply_constraints`], or written there and not moved
@@ -225,6 +248,7 @@ impl ParticleModel {
     fn self_contact_pass(
         sc: &mut crate::core::self_contact::SelfContact,
         colliders: &[Collider],
+        faces: (&[[u32; 3]], Scalar),
         inv_mass: &[Scalar],
         t: Scalar,
         state: &mut ParticleState,
@@ -233,8 +257,29 @@ impl ParticleModel {
         let support = sc.support_mut(state.x.len());
         for c in colliders {
             c.touching(t, slack, &state.x, support);
+            c.touching_faces(t, slack, faces.0, faces.1, &state.x, support);
         }
         sc.pass(&mut state.x, &mut state.v, inv_mass);
+    }
+
+    /// Remakes [`ParticleModel::features`] when the faces changed since they were made.
+    fn refresh_features(&mut self) {
+        if self.features_for == self.contact_faces {
+            return;
+        }
+        self.features_for.clone_from(&self.contact_faces);
+        let mut edges: Vec<[u32; 2]> = self
+            .contact_faces
+            .iter()
+            .flat_map(|&[a, b, c]| [[a, b], [b, c], [c, a]])
+            .map(|[a, b]| [a.min(b), a.max(b)])
+            .filter(|[a, b]| a != b)
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        self.features.clear();
+        self.features.extend_from_slice(&self.contact_faces);
+        self.features.extend(edges.iter().map(|&[a, b]| [a, b, b]));
     }
 
     /// A model of particles with the given masses, all free, with no forces.
@@ -252,6 +297,7 @@ impl ParticleModel {
         Self {
             mass,
             inv_mass,
+            face_edge: Scalar::INFINITY,
             ..Default::default()
         }
     }
@@ -910,11 +956,41 @@ impl OdeSystem<ParticleState> for ParticleModel {
         if let Some(sc) = &mut self.self_contact {
             sc.begin_frame(&state.x);
         }
+        if !self.contact_faces.is_empty() && !self.colliders.is_empty() {
+            self.refresh_features();
+            let x = &state.x;
+            let longest = self
+                .contact_faces
+                .iter()
+                .map(|f| {
+                    let [a, b, c] = f.map(|i| x.get(i as usize).copied().unwrap_or_default());
+                    a.distance_squared(b)
+                        .max(b.distance_squared(c))
+                        .max(c.distance_squared(a))
+                })
+                .fold(0.0, Scalar::max)
+                .sqrt();
+            // A triangle with a corner out of range or not finite: measured as unknown.
+            self.face_edge = if longest.is_finite() {
+                longest * FACE_EDGE_GROWTH
+            } else {
+                Scalar::INFINITY
+            };
+        }
     }
 
     /// Colliders (continuous against each), then the surface against itself when its parts
     /// may have come closer by half its thickness since the last pass.
     fn resolve_contacts(&mut self, t: Scalar, h: Scalar, state: &mut ParticleState) {
+        // The step's start, for the features' swept test, before any contact moves them.
+        let faces = !self.contact_faces.is_empty()
+            && self.colliders.iter().any(|c| c.needs_faces(self.face_edge));
+        if faces {
+            self.refresh_features();
+            self.face_start.clear();
+            self.face_start
+                .extend(state.x.iter().zip(&state.v).map(|(&x, &v)| x - v * h));
+        }
         crate::core::collide::resolve_all(
             &self.colliders,
             t,
@@ -923,6 +999,21 @@ impl OdeSystem<ParticleState> for ParticleModel {
             &mut state.v,
             &self.inv_mass,
         );
+        if faces {
+            for c in &self.colliders {
+                c.resolve_faces(
+                    t,
+                    h,
+                    &self.features,
+                    self.face_edge,
+                    &self.face_start,
+                    &mut state.x,
+                    &mut state.v,
+                    &self.inv_mass,
+                    &mut self.faces_near,
+                );
+            }
+        }
         // Colliders move free particles only: pins written just before still hold.
         if self.self_contact.is_none() && self.pins_held.get(&state.x) == PinsHeld::APPLIED {
             self.pins_held.set(PinsHeld::KEPT, &state.x);
@@ -930,7 +1021,14 @@ impl OdeSystem<ParticleState> for ParticleModel {
         if let Some(sc) = &mut self.self_contact
             && sc.advance(h, &state.x, &state.v)
         {
-            Self::self_contact_pass(sc, &self.colliders, &self.inv_mass, t, state);
+            Self::self_contact_pass(
+                sc,
+                &self.colliders,
+                (&self.contact_faces, self.face_edge),
+                &self.inv_mass,
+                t,
+                state,
+            );
         }
     }
 
@@ -944,7 +1042,14 @@ impl OdeSystem<ParticleState> for ParticleModel {
         if let Some(sc) = &mut self.self_contact
             && sc.pending()
         {
-            Self::self_contact_pass(sc, &self.colliders, &self.inv_mass, t, state);
+            Self::self_contact_pass(
+                sc,
+                &self.colliders,
+                (&self.contact_faces, self.face_edge),
+                &self.inv_mass,
+                t,
+                state,
+            );
         }
     }
 }

@@ -427,11 +427,11 @@ impl Scene {
             gravity: self.gravity,
             drag: self.drag,
             wind: self.wind,
-            // Without a surface, self-collision takes the tets' boundary.
-            surface: match (&self.self_collision, &self.surface) {
-                (Some(_), Some(s)) => s.triangles.clone(),
-                _ => vec![],
-            },
+            // Without a surface, contact takes the tets' boundary.
+            surface: self
+                .surface
+                .as_ref()
+                .map_or(vec![], |s| s.triangles.clone()),
             self_collision: self.self_collision,
             torn_from: self
                 .surface

@@ -27,6 +27,9 @@ struct FemInput<'a, 'w, 's> {
     /// Self-collision, the surface's triangles (empty: the tets' boundary) and which particles
     /// were torn from which (empty: from the body's own record, `torn_origin`).
     self_collision: Option<(SelfCollision, Vec<[u32; 3]>, Vec<u32>)>,
+    /// The surface's triangles, for colliders to touch between the particles (empty: the
+    /// tets' boundary, or none).
+    surface: Vec<[u32; 3]>,
     /// Each particle split off by tearing → the one it was split from, for bodies with no
     /// surface to keep that record.
     torn_origin: &'a HashMap<Entity, Entity>,
@@ -177,6 +180,7 @@ fn build_body(
     {
         return Err(format!("soft body {body_e}: Tearable {field} {message}"));
     }
+    layout.surface = fem.surface;
     if let Some((sc, triangles, torn_from)) = fem.self_collision {
         layout.self_collision = Some(sc.params());
         layout.surface = triangles;
@@ -347,7 +351,15 @@ pub(crate) fn prepare(
             || auto_settings.as_ref().is_some_and(|a| a.is_changed())
             || self_collision.as_ref().is_some_and(|c| c.is_changed())
             || tearable.as_ref().is_some_and(|t| t.is_changed())
-            || (self_collision.is_some() && surface.as_ref().is_some_and(|s| s.is_changed()))
+            || surface.as_ref().is_some_and(|s| {
+                // Its triangles are self-collision's, and colliders' between the particles.
+                s.is_changed()
+                    && (self_collision.is_some()
+                        || bs
+                            .sim
+                            .as_ref()
+                            .is_some_and(|sim| sim.system.contact_faces != s.triangles))
+            })
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
         dirty |= edited.binary_search(&body_e).is_ok();
@@ -418,11 +430,12 @@ pub(crate) fn prepare(
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
                 auto: auto_settings.map_or(AutoConfig::default(), |a| a.0),
                 self_collision: self_collision.map(|c| {
-                    let (tris, from) = surface.map_or((vec![], vec![]), |s| {
+                    let (tris, from) = surface.as_ref().map_or((vec![], vec![]), |s| {
                         (s.triangles.clone(), s.torn_from.clone())
                     });
                     (*c, tris, from)
                 }),
+                surface: surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
                 torn_origin: &bs.torn_origin,
                 tearable: tearable.map(|t| *t),
             };
