@@ -145,28 +145,7 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
             }
             let scene = cloth_pile(&p).expect("valid pile");
             let (model, state) = scene.build().expect("valid scene");
-            let h = if method == se {
-                p.stable_step()
-            } else {
-                1.0 / 60.0
-            };
-            let config = DriverConfig {
-                integrator: method,
-                policy: StepPolicy::Fixed { h },
-                frame_dt: 1.0 / 60.0,
-                ..Default::default()
-            };
-            let mut sim = Simulation::new(model, state, config);
-            let (wall, steps) = bevy_soft_body::core::kernels::with_threads(threads, || {
-                let (mut wall, mut steps) = (Duration::ZERO, 0u64);
-                for _ in 0..frames {
-                    let t = Instant::now();
-                    let rep = sim.advance_frame().expect("stable");
-                    wall += t.elapsed();
-                    steps += rep.substeps as u64;
-                }
-                (wall, steps)
-            });
+            let (sim, wall, steps) = timed(model, state, method, &p, frames, threads);
             let r = sim
                 .system
                 .self_contact
@@ -230,27 +209,7 @@ fn bench_faces() {
                 if !faces {
                     model.contact_faces.clear();
                 }
-                let h = if method == se {
-                    p.stable_step()
-                } else {
-                    1.0 / 60.0
-                };
-                let config = DriverConfig {
-                    integrator: method,
-                    policy: StepPolicy::Fixed { h },
-                    frame_dt: 1.0 / 60.0,
-                    ..Default::default()
-                };
-                let mut sim = Simulation::new(model, state, config);
-                let (mut wall, mut steps) = (Duration::ZERO, 0u64);
-                bevy_soft_body::core::kernels::with_threads(1, || {
-                    for _ in 0..frames {
-                        let t = Instant::now();
-                        let rep = sim.advance_frame().expect("stable");
-                        wall += t.elapsed();
-                        steps += rep.substeps as u64;
-                    }
-                });
+                let (_, wall, steps) = timed(model, state, method, &p, frames, 1);
                 cells.push(wall.as_secs_f64() * 1e6 / steps as f64);
             }
             println!(
@@ -262,6 +221,42 @@ fn bench_faces() {
             );
         }
     }
+}
+
+/// `frames` frames of the pile's cloths (`p`, built into `model` and `state`) with `method`
+/// at its step (the stable one for symplectic Euler, 1/60 s otherwise) on `threads` threads:
+/// the simulation, the wall time of its frames and the steps they took.
+fn timed(
+    model: ParticleModel,
+    state: ParticleState,
+    method: IntegratorKind,
+    p: &ClothPileParams,
+    frames: usize,
+    threads: usize,
+) -> (Simulation<ParticleState, ParticleModel>, Duration, u64) {
+    let h = if method == IntegratorKind::SymplecticEuler {
+        p.stable_step()
+    } else {
+        1.0 / 60.0
+    };
+    let config = DriverConfig {
+        integrator: method,
+        policy: StepPolicy::Fixed { h },
+        frame_dt: 1.0 / 60.0,
+        ..Default::default()
+    };
+    let mut sim = Simulation::new(model, state, config);
+    let (wall, steps) = bevy_soft_body::core::kernels::with_threads(threads, || {
+        let (mut wall, mut steps) = (Duration::ZERO, 0u64);
+        for _ in 0..frames {
+            let t = Instant::now();
+            let rep = sim.advance_frame().expect("stable");
+            wall += t.elapsed();
+            steps += rep.substeps as u64;
+        }
+        (wall, steps)
+    });
+    (sim, wall, steps)
 }
 
 /// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with one

@@ -246,6 +246,17 @@ pub struct Exchange {
 }
 
 impl Exchange {
+    /// Records an impulse `impulse` given to a particle at arm `arm` from the body's centre,
+    /// `tau` into the frame: the body gets its opposite.
+    fn give(&mut self, impulse: Vector, arm: Vector, tau: Scalar) {
+        let torque = arm.cross(impulse);
+        self.linear -= impulse;
+        self.angular -= torque;
+        self.linear_moment -= impulse * tau;
+        self.angular_moment -= torque * tau;
+        self.contacts += 1;
+    }
+
     /// How a rigid-body engine stepping the body over the frame `Δ` reproduces both the end
     /// velocity and the end position the body had in the soft step: an impulse at the start
     /// of its step and a constant force over it, linear and angular:
@@ -739,12 +750,7 @@ impl Collider {
                 impulse -= tdir * jt;
             }
             v[i] += impulse * wp;
-            let torque = r.cross(impulse);
-            ex.linear -= impulse;
-            ex.angular -= torque;
-            ex.linear_moment -= impulse * tau;
-            ex.angular_moment -= torque * tau;
-            ex.contacts += 1;
+            ex.give(impulse, r, tau);
         }
         contacts
     }
@@ -1067,13 +1073,7 @@ impl Collider {
             v[i] += impulse * (bary[k] * w[k]);
         }
         if let Some((r, ex, ..)) = body {
-            let tau = t - r.t0;
-            let torque = arm.cross(impulse);
-            ex.linear -= impulse;
-            ex.angular -= torque;
-            ex.linear_moment -= impulse * tau;
-            ex.angular_moment -= torque * tau;
-            ex.contacts += 1;
+            ex.give(impulse, arm, t - r.t0);
         }
         true
     }
