@@ -61,7 +61,9 @@ pub struct ParticleModel {
     /// made from.
     features: Vec<[u32; 3]>,
     features_for: Vec<[u32; 3]>,
-    /// The particles' positions at the step's start, for the features' swept test.
+    /// The particles' positions at the step's start, for the features' swept test: `x − h v`
+    /// before any contact (exact for the Euler methods, whose step ends at `x₀ + h v₁`; for
+    /// the others the start of the straight path with the end's velocity).
     face_start: Vec<Vector>,
     /// The features the last collider's face contact met (reused: a step allocates nothing).
     faces_near: Vec<(u32, Vector)>,
@@ -986,7 +988,10 @@ impl OdeSystem<ParticleState> for ParticleModel {
         let faces = !self.contact_faces.is_empty()
             && self.colliders.iter().any(|c| c.needs_faces(self.face_edge));
         if faces {
-            self.refresh_features();
+            // Made at each frame's start; here only for a model stepped without frames.
+            if self.features.is_empty() {
+                self.refresh_features();
+            }
             self.face_start.clear();
             self.face_start
                 .extend(state.x.iter().zip(&state.v).map(|(&x, &v)| x - v * h));
