@@ -636,11 +636,13 @@ mod plugin {
                 .iter()
                 .map(|p| p.y)
                 .fold(f32::NEG_INFINITY, f32::max);
-            if landed.is_none() && lowest < highest + 1.0 / 64.0 {
+            // In contact: within the proximity band of 1.5 thicknesses, where the impulses
+            // act (a cloth lying on the other rests at the thickness, to round-off).
+            if landed.is_none() && lowest < highest + 1.5 / 64.0 {
                 landed = Some(f);
             }
         }
-        println!("lower cloth woken at frame {woke:?}; upper within the thickness at {landed:?}");
+        println!("lower cloth woken at frame {woke:?}; upper in contact at {landed:?}");
         let (woke, landed) = (woke.expect("never woken"), landed.expect("never landed"));
         assert!(woke <= landed);
     }

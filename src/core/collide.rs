@@ -810,9 +810,12 @@ impl Collider {
     /// one frame-long step), and the triangle is put back on the side it came from, past the
     /// collider's extreme point that way by the thickness.
     ///
-    /// `edge` bounds the triangles' edges (see [`Collider::needs_faces`]: when the
-    /// particles' contact suffices for triangles that long, nothing is tested). Returns the
-    /// number of triangles pushed.
+    /// `faces` are the features: triangles, and edges written `[a, b, b]` (tested only when
+    /// they moved more than the thickness, the triangles covering them otherwise). `edge`
+    /// bounds their edges (see [`Collider::needs_faces`]: when the particles' contact suffices
+    /// for triangles that long, nothing is tested). `x0` holds the particles' positions at
+    /// the step's start, before any contact moved them; `near` is scratch, the features met
+    /// and the side each came from. Returns the number of features pushed in the first sweep.
     #[allow(clippy::too_many_arguments)]
     pub fn resolve_faces(
         &self,
