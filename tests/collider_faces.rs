@@ -41,6 +41,14 @@ fn segment_triangle_distance(a: P, b: P, t: &[P; 3]) -> f64 {
     at(0.5 * (lo + hi)).min(at(0.0)).min(at(1.0))
 }
 
+/// The nearest any of `tris` (at positions `x`) comes to the surface of a rod of radius `r`
+/// along `a b`.
+fn rod_distance(x: &[P], tris: &[[u32; 3]], a: P, b: P, r: f64) -> f64 {
+    tris.iter()
+        .map(|t| segment_triangle_distance(a, b, &t.map(|i| x[i as usize])) - r)
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Thickness of the colliders' contact (m).
 const THICK: f64 = 0.005;
 
@@ -155,10 +163,7 @@ fn a_cloth_drops_onto_a_rod_thinner_than_its_cells_and_hangs_over_it() {
     // 2 s: the fall (10 cm, 0.14 s), the drape and the sides' swing.
     let mut nearest = f64::INFINITY;
     let end = run(scene.clone(), true, 120, |x| {
-        for t in &tris {
-            let tri = t.map(|i| x[i as usize]);
-            nearest = nearest.min(segment_triangle_distance(a, b, &tri) - r);
-        }
+        nearest = nearest.min(rod_distance(x, &tris, a, b, r))
     });
     let centre_y = end.iter().map(|p| p[1]).sum::<f64>() / end.len() as f64;
     let lowest = end.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
@@ -274,10 +279,7 @@ fn frame_long_steps_keep_a_cloth_on_a_rod_thinner_than_its_cells() {
         scene.colliders = vec![collider];
         let mut nearest = f64::INFINITY;
         let end = run_with(scene, true, 60, integrator, 1.0 / 60.0, |x| {
-            for t in &tris {
-                let tri = t.map(|i| x[i as usize]);
-                nearest = nearest.min(segment_triangle_distance(a, b, &tri) - r);
-            }
+            nearest = nearest.min(rod_distance(x, &tris, a, b, r))
         });
         let mean = end.iter().map(|p| p[1]).sum::<f64>() / end.len() as f64;
         println!(

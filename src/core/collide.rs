@@ -845,10 +845,10 @@ impl Collider {
             (r, ex, j0, l0)
         });
         let n = x.len().min(x0.len()).min(v.len()).min(inv_mass.len());
-        let corners = |f: &[u32; 3]| {
-            let ids = f.map(|i| i as usize);
+        // The corners' inverse masses, unless all are pinned.
+        let weights = |ids: [usize; 3]| {
             let w = ids.map(|i| inv_mass[i]);
-            (ids[0].max(ids[1]).max(ids[2]) < n && w != [0.0; 3]).then_some((ids, w))
+            (w != [0.0; 3]).then_some(w)
         };
         // The farthest any particle moved relative to the collider: features farther than
         // twice that (and the thickness) are skipped before their own travel is measured.
@@ -880,7 +880,7 @@ impl Collider {
             if clear(tri, grow) || round && self.feature_held(&pose, thick, tri, None) {
                 continue;
             }
-            let Some((ids, w)) = corners(f) else { continue };
+            let Some(w) = weights(ids) else { continue };
             let travel = ids
                 .map(|i| moved(x, i))
                 .into_iter()
@@ -909,11 +909,10 @@ impl Collider {
                 else {
                     continue;
                 };
-                match self.back(&shape_pose, thick, (point, nrm, dist), n0) {
-                    Some(Some(back)) => (nrm, depth) = back,
-                    Some(None) => {}
-                    None => continue,
-                }
+                let Some(out) = self.back(&shape_pose, thick, (point, nrm, dist), n0) else {
+                    continue;
+                };
+                (nrm, depth) = out;
             }
             near.push((k as u32, nrm));
             if depth > 0.0 {
@@ -935,23 +934,21 @@ impl Collider {
         for _ in 1..FACE_SWEEPS {
             let mut worst: Scalar = 0.0;
             for &(k, side) in near.iter() {
-                let Some((ids, w)) = corners(&faces[k as usize]) else {
-                    continue;
-                };
+                // In range: the first sweep met it.
+                let ids = faces[k as usize].map(|i| i as usize);
+                let Some(w) = weights(ids) else { continue };
                 let tri = ids.map(|i| x[i]);
                 // Looked at up to several thicknesses away: a triangle pushed through by its
                 // neighbours goes back to the side it was on.
-                let Some((bary, point, mut nrm, dist)) =
+                let Some((bary, point, nrm, dist)) =
                     self.face_contact(&pose, &shape_pose, 4.0 * thick, tri)
                 else {
                     continue;
                 };
-                let mut depth = thick - dist;
-                match self.back(&shape_pose, thick, (point, nrm, dist), side) {
-                    Some(Some(back)) => (nrm, depth) = back,
-                    Some(None) => {}
-                    None => continue,
-                }
+                let Some((nrm, depth)) = self.back(&shape_pose, thick, (point, nrm, dist), side)
+                else {
+                    continue;
+                };
                 worst = worst.max(depth);
                 if depth > 0.0 {
                     self.face_response(
@@ -980,19 +977,19 @@ impl Collider {
     /// extreme point that way. One inside the collider (a rod through a triangle) goes out
     /// along the contact normal or that way, whichever is the shorter push: the penetration
     /// depth of a flat feature may point along its plane, and triangles on either side of
-    /// the rod would then push their shared corners back and forth. `Some(None)`: as it is;
-    /// `None`: the collider has no extreme point to go by.
-    #[allow(clippy::type_complexity)]
+    /// the rod would then push their shared corners back and forth. The normal and the depth
+    /// to push by (along the contact normal, `thick − dist`, when it did neither); `None`
+    /// when it must go back but the collider has no extreme point to go by.
     fn back(
         &self,
         shape_pose: &Pose3,
         thick: Scalar,
         (point, nrm, dist): (Vector, Vector, Scalar),
         side: Vector,
-    ) -> Option<Option<(Vector, Scalar)>> {
+    ) -> Option<(Vector, Scalar)> {
         let through = nrm.dot(side) < 0.0;
         if !through && dist >= 0.0 {
-            return Some(None);
+            return Some((nrm, thick - dist));
         }
         let far = self
             .shape
@@ -1000,7 +997,11 @@ impl Collider {
             .support_point(shape_pose, side.to_f32())
             .to_scalar();
         let d = thick - (point - far).dot(side);
-        Some((through || d < thick - dist).then_some((side, d)))
+        Some(if through || d < thick - dist {
+            (side, d)
+        } else {
+            (nrm, thick - dist)
+        })
     }
 
     /// One triangle's response to its contact `(bary, point, normal, depth)` (see

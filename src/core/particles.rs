@@ -79,6 +79,14 @@ pub struct ParticleModel {
 /// tearing cloth's) may let a round collider as far into the surface as between particles.
 pub const FACE_EDGE_GROWTH: Scalar = 1.5;
 
+/// Whether collider `c` meets a surface's triangles as well as its particles: not a dynamic
+/// body's. An impulse at a point inside a triangle leaves its corners turning, and a rigid body
+/// resting on the surface jitters on them (a 10 kg crate on a trampoline at 6.4 cm/s, a ball on
+/// a jelly at 3 cm/s, where both rest with the particles alone).
+fn meets_faces(c: &Collider) -> bool {
+    c.response.is_none()
+}
+
 /// What the model knows of its pins in one state (told apart by its positions' address):
 /// nothing, written there by [`OdeSystem::apply_constraints`], or written there and not moved
 /// since (see [`ParticleModel::apply_constraints`]).
@@ -246,24 +254,22 @@ impl std::error::Error for ModelError {}
 
 impl ParticleModel {
     /// A self-contact pass at time `t`, with the particles touching a collider (within its
-    /// thickness plus half the surface's) marked as supported.
-    fn self_contact_pass(
-        sc: &mut crate::core::self_contact::SelfContact,
-        colliders: &[Collider],
-        faces: (&[[u32; 3]], Scalar),
-        inv_mass: &[Scalar],
-        t: Scalar,
-        state: &mut ParticleState,
-    ) {
+    /// thickness plus half the surface's, at a particle or, where the collider meets them, at
+    /// a triangle) marked as supported.
+    fn self_contact_pass(&mut self, t: Scalar, state: &mut ParticleState) {
+        let Some(sc) = &mut self.self_contact else {
+            return;
+        };
         let slack = 0.5 * sc.params.thickness as Scalar;
         let support = sc.support_mut(state.x.len());
-        for c in colliders {
+        for c in &self.colliders {
             c.touching(t, slack, &state.x, support);
-            if c.response.is_none() {
-                c.touching_faces(t, slack, faces.0, faces.1, &state.x, support);
+            if meets_faces(c) {
+                let (faces, edge) = (&self.contact_faces, self.face_edge);
+                c.touching_faces(t, slack, faces, edge, &state.x, support);
             }
         }
-        sc.pass(&mut state.x, &mut state.v, inv_mass);
+        sc.pass(&mut state.x, &mut state.v, &self.inv_mass);
     }
 
     /// Remakes [`ParticleModel::features`] when the faces changed since they were made.
@@ -987,15 +993,11 @@ impl OdeSystem<ParticleState> for ParticleModel {
     /// may have come closer by half its thickness since the last pass.
     fn resolve_contacts(&mut self, t: Scalar, h: Scalar, state: &mut ParticleState) {
         // The step's start, for the features' swept test, before any contact moves them.
-        // Colliders of dynamic bodies meet the particles alone: an impulse at a point inside
-        // a triangle leaves its corners turning, and a rigid body resting on the surface
-        // jitters on them (a 10 kg crate on a trampoline at 6.4 cm/s, a ball on a jelly at
-        // 3 cm/s, where both rest with the particles alone).
         let faces = !self.contact_faces.is_empty()
             && self
                 .colliders
                 .iter()
-                .any(|c| c.response.is_none() && c.needs_faces(self.face_edge));
+                .any(|c| meets_faces(c) && c.needs_faces(self.face_edge));
         if faces {
             // Made at each frame's start; here only for a model stepped without frames.
             if self.features.is_empty() {
@@ -1014,7 +1016,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
             &self.inv_mass,
         );
         if faces {
-            for c in self.colliders.iter().filter(|c| c.response.is_none()) {
+            for c in self.colliders.iter().filter(|c| meets_faces(c)) {
                 c.resolve_faces(
                     t,
                     h,
@@ -1032,17 +1034,12 @@ impl OdeSystem<ParticleState> for ParticleModel {
         if self.self_contact.is_none() && self.pins_held.get(&state.x) == PinsHeld::APPLIED {
             self.pins_held.set(PinsHeld::KEPT, &state.x);
         }
-        if let Some(sc) = &mut self.self_contact
-            && sc.advance(h, &state.x, &state.v)
+        if self
+            .self_contact
+            .as_mut()
+            .is_some_and(|sc| sc.advance(h, &state.x, &state.v))
         {
-            Self::self_contact_pass(
-                sc,
-                &self.colliders,
-                (&self.contact_faces, self.face_edge),
-                &self.inv_mass,
-                t,
-                state,
-            );
+            self.self_contact_pass(t, state);
         }
     }
 
@@ -1053,17 +1050,8 @@ impl OdeSystem<ParticleState> for ParticleModel {
     fn end_frame(&mut self, t: Scalar, state: &mut ParticleState) {
         // What the pins' record says holds within a frame only (see `begin_frame`).
         self.pins_held.forget();
-        if let Some(sc) = &mut self.self_contact
-            && sc.pending()
-        {
-            Self::self_contact_pass(
-                sc,
-                &self.colliders,
-                (&self.contact_faces, self.face_edge),
-                &self.inv_mass,
-                t,
-                state,
-            );
+        if self.self_contact.as_ref().is_some_and(|sc| sc.pending()) {
+            self.self_contact_pass(t, state);
         }
     }
 }
