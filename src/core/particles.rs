@@ -79,14 +79,6 @@ pub struct ParticleModel {
 /// tearing cloth's) may let a round collider as far into the surface as between particles.
 pub const FACE_EDGE_GROWTH: Scalar = 1.5;
 
-/// Whether collider `c` meets a surface's triangles as well as its particles: not a dynamic
-/// body's. An impulse at a point inside a triangle leaves its corners turning, and a rigid body
-/// resting on the surface jitters on them (a 10 kg crate on a trampoline at 6.4 cm/s, a ball on
-/// a jelly at 3 cm/s, where both rest with the particles alone).
-fn meets_faces(c: &Collider) -> bool {
-    c.response.is_none()
-}
-
 /// What the model knows of its pins in one state (told apart by its positions' address):
 /// nothing, written there by [`OdeSystem::apply_constraints`], or written there and not moved
 /// since (see [`ParticleModel::apply_constraints`]).
@@ -254,8 +246,8 @@ impl std::error::Error for ModelError {}
 
 impl ParticleModel {
     /// A self-contact pass at time `t`, with the particles touching a collider (within its
-    /// thickness plus half the surface's, at a particle or, where the collider meets them, at
-    /// a triangle) marked as supported.
+    /// thickness plus half the surface's, at a particle or at a triangle) marked as
+    /// supported.
     fn self_contact_pass(&mut self, t: Scalar, state: &mut ParticleState) {
         let Some(sc) = &mut self.self_contact else {
             return;
@@ -264,10 +256,8 @@ impl ParticleModel {
         let support = sc.support_mut(state.x.len());
         for c in &self.colliders {
             c.touching(t, slack, &state.x, support);
-            if meets_faces(c) {
-                let (faces, edge) = (&self.contact_faces, self.face_edge);
-                c.touching_faces(t, slack, faces, edge, &state.x, support);
-            }
+            let (faces, edge) = (&self.contact_faces, self.face_edge);
+            c.touching_faces(t, slack, faces, edge, &state.x, support);
         }
         sc.pass(&mut state.x, &mut state.v, &self.inv_mass);
     }
@@ -994,10 +984,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
     fn resolve_contacts(&mut self, t: Scalar, h: Scalar, state: &mut ParticleState) {
         // The step's start, for the features' swept test, before any contact moves them.
         let faces = !self.contact_faces.is_empty()
-            && self
-                .colliders
-                .iter()
-                .any(|c| meets_faces(c) && c.needs_faces(self.face_edge));
+            && self.colliders.iter().any(|c| c.needs_faces(self.face_edge));
         if faces {
             // Made at each frame's start; here only for a model stepped without frames.
             if self.features.is_empty() {
@@ -1016,7 +1003,7 @@ impl OdeSystem<ParticleState> for ParticleModel {
             &self.inv_mass,
         );
         if faces {
-            for c in self.colliders.iter().filter(|c| meets_faces(c)) {
+            for c in &self.colliders {
                 c.resolve_faces(
                     t,
                     h,
