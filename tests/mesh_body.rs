@@ -277,11 +277,20 @@ fn meshes_the_builder_cannot_use_are_errors_saying_why() {
                 tearing: Some(Tearable { max_strain: 0.0 }),
                 ..Default::default()
             };
+            // Half the sheet's shortest edge (10 cm) is the most a thickness may be.
+            let too_thick = MeshBody {
+                self_collision: Some(SelfCollision {
+                    thickness: 0.06,
+                    friction: 0.3,
+                }),
+                ..Default::default()
+            };
             [
                 c.spawn_mesh_body(&lines, &MeshBody::default(), SoftBody::default()),
                 c.spawn_mesh_body(&sheet(), &no_colours, SoftBody::default()),
                 c.spawn_mesh_body(&bad_index, &MeshBody::default(), SoftBody::default()),
                 c.spawn_mesh_body(&sheet(), &no_limit, SoftBody::default()),
+                c.spawn_mesh_body(&sheet(), &too_thick, SoftBody::default()),
             ]
             .into_iter()
             .map(|r| r.unwrap_err().to_string())
@@ -293,6 +302,11 @@ fn meshes_the_builder_cannot_use_are_errors_saying_why() {
     assert!(errors[1].contains("vertex colours"), "{}", errors[1]);
     assert!(errors[2].contains("999"), "{}", errors[2]);
     assert!(errors[3].contains("tearing.max_strain"), "{}", errors[3]);
+    assert!(
+        errors[4].contains("self_collision.thickness"),
+        "{}",
+        errors[4]
+    );
 }
 
 #[test]
@@ -525,4 +539,184 @@ fn a_torn_mesh_body_draws_the_cut_its_surface_would_with_split_vertices_that_kee
     let indices: Vec<u32> = mesh.indices().unwrap().iter().map(|i| i as u32).collect();
     let want: Vec<u32> = surface.triangles.iter().flatten().copied().collect();
     assert_eq!(indices, want);
+}
+
+/// Grids of `n × n` square cells of `cell` metres, lying flat: one per `(height, offset)`,
+/// from `(offset, offset)` in x and z, all in one mesh (two triangles a cell).
+fn lying_grids(n: u32, cell: f32, grids: &[(f32, f32)]) -> Mesh {
+    let (mut pos, mut idx) = (vec![], vec![]);
+    for &(y, off) in grids {
+        let base = pos.len() as u32;
+        for j in 0..=n {
+            for i in 0..=n {
+                pos.push([off + i as f32 * cell, y, off + j as f32 * cell]);
+            }
+        }
+        let v = |i: u32, j: u32| base + j * (n + 1) + i;
+        for j in 0..n {
+            for i in 0..n {
+                idx.extend([v(i, j), v(i, j + 1), v(i + 1, j + 1)]);
+                idx.extend([v(i, j), v(i + 1, j + 1), v(i + 1, j)]);
+            }
+        }
+    }
+    let mut m = Mesh::new(PrimitiveTopology::TriangleList, default());
+    m.insert_attribute(Mesh::ATTRIBUTE_POSITION, pos);
+    m.insert_indices(Indices::U32(idx));
+    m
+}
+
+/// A mesh body's particles (positions) and its mesh's triangles on them: each vertex of
+/// `SoftBodyMeshSurface` shows a particle, looked up in the body's list.
+fn mesh_body_surface(app: &App, body: Entity) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let w = app.world();
+    let parts = w.get::<BodyParticles>(body).unwrap().entities().to_vec();
+    let x = parts
+        .iter()
+        .map(|p| {
+            w.get::<Particle>(*p)
+                .unwrap()
+                .position
+                .as_dvec3()
+                .to_array()
+        })
+        .collect();
+    let ms = w.get::<SoftBodyMeshSurface>(body).unwrap();
+    let at = |v: u32| {
+        parts
+            .iter()
+            .position(|p| *p == ms.vertices[v as usize])
+            .unwrap() as u32
+    };
+    let tris = ms.triangles.iter().map(|t| t.map(at)).collect();
+    (x, tris)
+}
+
+fn spawn_mesh(app: &mut App, mesh: Mesh, self_collision: Option<SelfCollision>) -> Entity {
+    app.world_mut()
+        .run_system_once(move |mut c: Commands| {
+            c.spawn_mesh_body(
+                &mesh,
+                &MeshBody {
+                    self_collision,
+                    ..Default::default()
+                },
+                SoftBody::default(),
+            )
+            .unwrap()
+        })
+        .unwrap()
+}
+
+/// A body made from the game's mesh is met by colliders between its particles: a 9 × 9 mesh
+/// of 10 cm cells dropped onto a ball of radius 2 cm under the middle of its middle cell (7 cm
+/// from the cell's corners, so no particle ever touches it) rests on the ball over 1 s, every
+/// frame's triangles at least half the contact thickness from it (`common::intersect`'s
+/// point–triangle distance). With the particles alone the mesh fell past the ball.
+#[test]
+fn colliders_meet_a_mesh_body_between_its_particles() {
+    use bevy_soft_body::core::collide::{ColliderDesc, ShapeDesc};
+    let mut app = app();
+    let (r, centre) = (0.02, [0.0, 0.3, 0.0]);
+    let thickness = SoftBodyCollider::default().thickness as f64;
+    app.world_mut()
+        .run_system_once(move |mut c: Commands| {
+            c.spawn_collider(&ColliderDesc {
+                shape: ShapeDesc::Sphere { radius: r },
+                motion: bevy_soft_body::core::motion::Motion::Fixed { position: centre },
+                rotation: [0.0, 0.0, 0.0, 1.0],
+                material: bevy_soft_body::core::collide::ContactMaterial {
+                    thickness,
+                    friction: 0.5,
+                    ..Default::default()
+                },
+            });
+        })
+        .unwrap();
+    let body = spawn_mesh(&mut app, lying_grids(9, 0.1, &[(0.4, -0.45)]), None);
+    let mut nearest = f64::INFINITY;
+    for _ in 0..64 {
+        app.update();
+        let (x, tris) = mesh_body_surface(&app, body);
+        for t in &tris {
+            let tri = t.map(|i| x[i as usize]);
+            nearest = nearest.min(common::intersect::point_triangle_distance(centre, &tri) - r);
+        }
+    }
+    let (x, _) = mesh_body_surface(&app, body);
+    let highest = x.iter().map(|p| p[1]).fold(f64::MIN, f64::max);
+    println!(
+        "nearest {:.2} mm (thickness {:.0} mm); highest particle at {highest:.3} m after 1 s",
+        nearest * 1e3,
+        thickness * 1e3
+    );
+    assert!(
+        nearest >= 0.5 * thickness,
+        "the ball came {nearest} m from the mesh"
+    );
+    assert!(
+        highest > centre[1],
+        "the mesh rests on the ball ({highest})"
+    );
+}
+
+/// Self-collision of a body made from the game's mesh, with its mesh's triangles: two 6 × 6
+/// sheets of 10 cm cells in one mesh, the upper dropped from 20 cm onto the lower lying on the
+/// ground, its particles over the middles of the lower's cells. With `SelfCollision` (1 cm) it
+/// lands on the lower sheet and stays at least half the thickness off its triangles; without,
+/// it falls through onto the ground, into the lower sheet's plane.
+#[test]
+fn a_mesh_body_with_self_collision_keeps_its_layers_apart() {
+    use bevy_soft_body::core::build::ground;
+    let nearest_layers = |self_collision: Option<SelfCollision>| {
+        let mut app = app();
+        app.world_mut()
+            .run_system_once(|mut c: Commands| {
+                c.spawn_collider(&ground(0.0, 0.0, 0.5));
+            })
+            .unwrap();
+        let mesh = lying_grids(6, 0.1, &[(0.011, 0.0), (0.2, 0.05)]);
+        let body = spawn_mesh(&mut app, mesh, self_collision);
+        let mut nearest = f64::INFINITY;
+        for f in 0..64 {
+            app.update();
+            let status = app.world().get::<SoftBodyStatus>(body).unwrap();
+            assert!(
+                matches!(status.state, BodyState::Running | BodyState::Sleeping),
+                "{:?}",
+                status.state
+            );
+            if f < 32 {
+                continue;
+            }
+            // The upper sheet's particles (the last 49) against the lower's triangles (the
+            // first 72).
+            let (x, tris) = mesh_body_surface(&app, body);
+            let upper = &x[x.len() - 49..];
+            for t in &tris[..72] {
+                let tri = t.map(|i| x[i as usize]);
+                for p in upper {
+                    nearest = nearest.min(common::intersect::point_triangle_distance(*p, &tri));
+                }
+            }
+        }
+        nearest
+    };
+    let t = 0.01;
+    let with = nearest_layers(Some(SelfCollision {
+        thickness: t as f32,
+        friction: 0.3,
+    }));
+    let without = nearest_layers(None);
+    println!(
+        "over 0.5–1 s the upper sheet's particles came {:.2} mm from the lower's triangles with self-collision ({:.0} mm), {:.2} mm without",
+        with * 1e3,
+        t * 1e3,
+        without * 1e3
+    );
+    assert!(with >= 0.5 * t, "layers {with} m apart");
+    assert!(
+        without < 0.5 * t,
+        "without self-collision: {without} m apart"
+    );
 }

@@ -83,6 +83,11 @@ pub struct MeshBody {
     /// along the cut (vertices split, their attributes kept). A limit that is not positive
     /// is an error naming `tearing.max_strain`.
     pub tearing: Option<Tearable>,
+    /// Self-collision ([`SelfCollision`]) of the mesh's surface, checked against its welded
+    /// triangles (a thickness too large for its shortest edge is an error naming
+    /// `self_collision.thickness`). Colliders meet the mesh's triangles between its particles
+    /// with or without it.
+    pub self_collision: Option<SelfCollision>,
     /// Colour of the default material when the body has no `MeshMaterial3d`.
     pub color: Option<Color>,
 }
@@ -208,8 +213,16 @@ pub(crate) fn spawn_mesh_body(
     let mut scene = built.scene;
     scene.wind = params.wind;
     scene.tearing = params.tearing.map(|t| t.params());
-    scene.surface = None; // drawn with the mesh itself
+    // Self-collision checked against the welded surface; the body is spawned without a
+    // surface of its own (drawn with the mesh itself, whose triangles stand for it).
+    scene.self_collision = params.self_collision.map(|c| c.params());
+    scene.validate()?;
+    let self_collision = scene.self_collision.take();
+    scene.surface = None;
     let (root, particles) = spawn_scene(commands, &scene, body)?;
+    if let Some(sc) = self_collision {
+        commands.entity(root).insert(SelfCollision::from(sc));
+    }
     if let Some((target, at)) = params.attach {
         let inv = at.affine().inverse();
         for (p, e) in scene.particles.iter().zip(&particles) {

@@ -273,6 +273,7 @@ pub(crate) fn prepare(
             Option<Ref<Tearable>>,
             Has<SoftBodySleepingDisabled>,
             Option<Ref<AutoSettings>>,
+            Option<Ref<crate::ecs::SoftBodyMeshSurface>>,
         ),
     )>,
     (tets, changed_tets, mut removed_tets, mut removed_materials): TetParams,
@@ -331,10 +332,15 @@ pub(crate) fn prepare(
             tearable,
             no_sleep,
             auto_settings,
+            mesh_surface,
         ),
     ) in &mut bodies
     {
         let plist = plist.map_or(no_list, |p| p.entities());
+        // A body drawn with the game's own mesh: its triangles, on the particles, are the
+        // surface (for colliders between the particles, and self-collision), unless the body
+        // has a surface of its own.
+        let mesh_surface = mesh_surface.filter(|_| surface.is_none());
         let slist = slist.map_or(no_list, |s| s.entities());
         let tlist = tlist.map_or(no_list, |t| t.entities());
         let bs = &mut *bs;
@@ -359,6 +365,13 @@ pub(crate) fn prepare(
                             .sim
                             .as_ref()
                             .is_some_and(|sim| sim.system.contact_faces != s.triangles))
+            })
+            || mesh_surface.as_ref().is_some_and(|m| {
+                m.is_changed()
+                    && bs
+                        .sim
+                        .as_ref()
+                        .is_some_and(|sim| sim.system.contact_faces != mesh_triangles(m, plist))
             })
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
@@ -423,19 +436,19 @@ pub(crate) fn prepare(
             bs.springs = slist.to_vec();
             bs.tets = tlist.to_vec();
             let wind = wind.map(|w| *w).or(global_wind.0);
+            let (tris, from) = match (&surface, &mesh_surface) {
+                (Some(s), _) => (s.triangles.clone(), s.torn_from.clone()),
+                (None, Some(m)) => (mesh_triangles(m, plist), vec![]),
+                (None, None) => (vec![], vec![]),
+            };
             let fem = FemInput {
                 list: tlist,
                 tets: &tets,
                 material: material.map(|m| m.0),
                 solver: solver.map_or(SolverChoice::Auto, |s| s.0),
                 auto: auto_settings.map_or(AutoConfig::default(), |a| a.0),
-                self_collision: self_collision.map(|c| {
-                    let (tris, from) = surface.as_ref().map_or((vec![], vec![]), |s| {
-                        (s.triangles.clone(), s.torn_from.clone())
-                    });
-                    (*c, tris, from)
-                }),
-                surface: surface.as_ref().map_or(vec![], |s| s.triangles.clone()),
+                self_collision: self_collision.map(|c| (*c, tris.clone(), from)),
+                surface: tris,
                 torn_origin: &bs.torn_origin,
                 tearable: tearable.map(|t| *t),
             };
@@ -508,6 +521,32 @@ pub(crate) fn prepare(
             }
         }
     }
+}
+
+/// The triangles of a body drawn with the game's own mesh, on the body's particles (their
+/// indices in `list`): each mesh vertex shows a particle, and vertices split along a UV seam
+/// show the same one. A triangle with a vertex showing no particle of the body, or with two
+/// corners on one particle, is left out.
+fn mesh_triangles(mesh: &crate::ecs::SoftBodyMeshSurface, list: &[Entity]) -> Vec<[u32; 3]> {
+    let index: HashMap<Entity, u32> = list
+        .iter()
+        .enumerate()
+        .map(|(i, &e)| (e, i as u32))
+        .collect();
+    let particle = |v: u32| {
+        mesh.vertices
+            .get(v as usize)
+            .and_then(|e| index.get(e))
+            .copied()
+    };
+    mesh.triangles
+        .iter()
+        .filter_map(|t| {
+            let [a, b, c] = t.map(particle);
+            let t = [a?, b?, c?];
+            (t[0] != t[1] && t[1] != t[2] && t[2] != t[0]).then_some(t)
+        })
+        .collect()
 }
 
 /// A body's particles were removed or reordered (a mouse grab's handle let go after a tear
