@@ -481,6 +481,27 @@ impl Collider {
                 let n = (pose.rotation * n).to_scalar();
                 Some((c + (pose.rotation * q).to_scalar() + n * thick, n))
             }
+            Fast::General if let Some(cap) = self.shape.as_capsule() => {
+                // Its own: the nearest point of its axis, in its frame (in `f32`, as parry's
+                // projection, which it equals).
+                let local = pose.rotation.inverse() * (p - c).to_f32();
+                let (q, d, dist) = capsule_axis_nearest(cap, local);
+                let r = cap.radius as Scalar;
+                if dist as Scalar >= r + thick {
+                    return None;
+                }
+                let n = if dist > 1e-9 {
+                    d / dist
+                } else {
+                    // On the axis: out across it.
+                    (cap.segment.b - cap.segment.a).any_orthonormal_vector()
+                };
+                let n_world = (pose.rotation * n).to_scalar();
+                Some((
+                    c + (pose.rotation * q).to_scalar() + n_world * (r + thick),
+                    n_world,
+                ))
+            }
             Fast::General => {
                 let pose = Pose3::from_parts(c.to_f32(), pose.rotation);
                 let pf = p.to_f32();
@@ -561,6 +582,17 @@ impl Collider {
             Fast::Cuboid(half) if pose.omega == Vector::ZERO => {
                 let reach = half.length() as Scalar + thick + (v - pose.velocity).length() * h;
                 (p - pose.origin).length_squared() > reach * reach * 1.0001
+            }
+            // A capsule not turning: farther from its axis than its radius and the thickness,
+            // by as much.
+            Fast::General if pose.omega == Vector::ZERO => {
+                let Some(cap) = self.shape.as_capsule() else {
+                    return false;
+                };
+                let local = pose.rotation.inverse() * (p - pose.origin).to_f32();
+                let (_, _, dist) = capsule_axis_nearest(cap, local);
+                let reach = cap.radius as Scalar + thick + (v - pose.velocity).length() * h;
+                dist as Scalar > reach * 1.0001 + 1e-6
             }
             _ => false,
         }
@@ -1395,6 +1427,25 @@ fn triangle_box_closest(t: [glam::DVec3; 3], h: glam::DVec3) -> Option<(glam::DV
     Some((best.1, best.2))
 }
 
+/// The point of capsule `cap`'s axis nearest `p` (in its frame), the offset from it to `p`
+/// and its length.
+fn capsule_axis_nearest(
+    cap: &parry3d::shape::Capsule,
+    p: glam::Vec3,
+) -> (glam::Vec3, glam::Vec3, f32) {
+    let (a, b) = (cap.segment.a, cap.segment.b);
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let q = a + ab * t;
+    let d = p - q;
+    (q, d, d.length())
+}
+
 /// Whether triangle `t` (a segment when two corners coincide) and the box of half extents `h`
 /// centred at the origin overlap: no separating axis among the box's three, the triangle's
 /// normal and the nine products of one of each's edges. An axis too short to be told apart
@@ -1602,7 +1653,8 @@ mod tests {
     use super::*;
 
     /// `Collider::clear` stands for `swept_contact` finding nothing: over random particles
-    /// near a sphere (still, and moving) and a tilted half-space, with paths up to several
+    /// near a sphere (still, and moving), a tilted half-space and a tilted capsule, with paths
+    /// up to several
     /// thicknesses long, no particle it calls clear has a contact, and it calls clear most of
     /// those far away (so the response loops skip them).
     #[test]
@@ -1637,6 +1689,14 @@ mod tests {
                 SharedShape::halfspace(parry3d::math::Vector::Y),
                 Motion::Fixed {
                     position: [0.0, -0.2, 0.0],
+                },
+                tilt,
+                material,
+            ),
+            Collider::new(
+                SharedShape::capsule_y(0.25, 0.08),
+                Motion::Fixed {
+                    position: [0.1, 0.0, 0.1],
                 },
                 tilt,
                 material,
@@ -2066,5 +2126,62 @@ mod tests {
             }
         }
         assert!(met > 1000, "{met} contacts");
+    }
+
+    /// A capsule's own particle contact (the nearest point of its axis) is parry's projection
+    /// (the general path): over random points around a turned capsule, in it, near it and far,
+    /// the same contact or none, targets and normals within `f32` round-off.
+    #[test]
+    fn a_capsule_particle_contact_is_parrys_projection() {
+        let mut rng = crate::math::test_rng(0x7f4a_7c15_9e37_79b9u64);
+        let mut rnd = move || rng() as Scalar;
+        let rot = Rot3::from_scaled_axis(glam::Vec3::new(-0.4, 0.2, 0.7));
+        let fast = Collider::new(
+            SharedShape::capsule_y(0.3, 0.06),
+            Motion::Fixed {
+                position: [0.5, -0.2, 0.1],
+            },
+            rot,
+            ContactMaterial::default(),
+        );
+        let pose = fast.pose(0.0);
+        let (mut met, mut inside) = (0, 0);
+        for _ in 0..20_000 {
+            let local =
+                glam::Vec3::new(0.12 * rnd() as f32, 0.4 * rnd() as f32, 0.12 * rnd() as f32);
+            let p = pose.origin + (rot * local).to_scalar();
+            let a = fast.contact(&pose, 0.02, p);
+            // The general path, parry's projection, by the same collider's shape.
+            let shape_pose = Pose3::from_parts(pose.origin.to_f32(), rot);
+            let proj = fast.shape.project_point(&shape_pose, p.to_f32(), false);
+            let off = p.to_f32() - proj.point;
+            let dist = off.length() * if proj.is_inside { -1.0 } else { 1.0 };
+            match a {
+                Some((target, n)) => {
+                    met += 1;
+                    inside += usize::from(proj.is_inside);
+                    assert!(
+                        dist < 0.02 + 1e-5,
+                        "{p:?}: contact at {dist} from the surface"
+                    );
+                    // The target: the projection, the thickness out along the normal.
+                    let want = proj.point.to_scalar() + n * 0.02;
+                    assert!(
+                        (target - want).length() < 1e-5,
+                        "{p:?}: {target} against {want}"
+                    );
+                    if off.length() > 1e-3 {
+                        let theirs = (off / off.length()).to_scalar()
+                            * if proj.is_inside { -1.0 } else { 1.0 };
+                        assert!((n - theirs).length() < 1e-3, "{p:?}: {n} against {theirs}");
+                    }
+                }
+                None => assert!(dist > 0.02 - 1e-5, "{p:?}: none at {dist}"),
+            }
+        }
+        assert!(
+            met > 5_000 && inside > 1_000,
+            "{met} contacts, {inside} inside"
+        );
     }
 }
