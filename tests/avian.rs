@@ -173,29 +173,6 @@ fn a_ball_thrown_into_a_free_cloth_keeps_the_momentum_of_both() {
     );
 }
 
-/// A lying cloth whose border is pinned: a trampoline, 2 m square, 21 × 21 particles.
-fn trampoline() -> Scene {
-    let n = 21;
-    let mut scene = build::cloth(&build::ClothParams {
-        rows: n,
-        cols: n,
-        width: 2.0,
-        height: 2.0,
-        mass: 0.02,
-        k_structural: 3000.0,
-        k_shear: 500.0,
-        k_flex: 100.0,
-        damping: 2.0,
-        drag: 0.05,
-        pins: build::ClothPins::Border,
-        hanging: false,
-        origin: [0.0, 0.0, 0.0],
-    })
-    .unwrap();
-    scene.colliders.clear();
-    scene
-}
-
 /// A 10 kg crate dropped on the trampoline bounces and comes to rest on it (the last of twenty
 /// seconds is measured); at rest the cloth's contact impulse per second on it is its weight,
 /// and it does not jitter. The cloth holds the crate's lower edges at the thickness (its
@@ -205,7 +182,7 @@ fn trampoline() -> Scene {
 #[test]
 fn a_crate_comes_to_rest_on_a_trampoline_held_by_its_weight() {
     let mut app = app();
-    let cloth = spawn(&mut app, &trampoline(), explicit(1.0 / 1200.0));
+    let cloth = spawn(&mut app, &common::trampoline(), explicit(1.0 / 1200.0));
     let mass = 10.0;
     let g = 9.81;
     let krate = app

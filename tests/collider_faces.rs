@@ -430,30 +430,6 @@ impl Rigid {
     }
 }
 
-/// A lying trampoline: 21 × 21 particles of 20 g, 2 m square (cells of 10 cm, diagonals of
-/// 14 cm), its border pinned, at height 0.
-fn trampoline() -> Scene {
-    let mut s = cloth(&ClothParams {
-        rows: 21,
-        cols: 21,
-        width: 2.0,
-        height: 2.0,
-        mass: 0.02,
-        k_structural: 3000.0,
-        k_shear: 500.0,
-        k_flex: 100.0,
-        damping: 2.0,
-        drag: 0.05,
-        pins: ClothPins::Border,
-        hanging: false,
-        origin: [0.0, 0.0, 0.0],
-    })
-    .unwrap();
-    s.colliders.clear();
-    s.gravity = G.to_array();
-    s
-}
-
 /// What a rigid body dropped onto a soft one did.
 struct Landing {
     body: Rigid,
@@ -547,7 +523,7 @@ fn a_rigid_cube_rests_on_a_trampoline_with_its_edges_off_the_cloth() {
 /// round-off: 1 %), still (1 cm/s), and the trampoline's impulse over the last second its
 /// weight (3 %, as `tests/avian.rs` asks of a crate).
 fn falls_through_alone_and_rests_on_the_triangles(name: &str, make: impl Fn() -> Rigid) {
-    let through = land(trampoline(), make(), false, 120, 0);
+    let through = land(common::trampoline(), make(), false, 120, 0);
     println!(
         "{name}, particles alone: at {:.3} m after 2 s",
         through.body.c.y
@@ -557,7 +533,7 @@ fn falls_through_alone_and_rests_on_the_triangles(name: &str, make: impl Fn() ->
         "the particles alone held the {name} at {}",
         through.body.c.y
     );
-    let on = land(trampoline(), make(), true, 600, 0);
+    let on = land(common::trampoline(), make(), true, 600, 0);
     let weight = on.body.m * 9.81;
     println!(
         "{name}, triangles: nearest {:.2} mm, at the end {:.2} mm (thickness {:.1} mm); impulse over the last second {:.4} N·s (weight {weight:.4} N); largest speed then {:.2e} m/s",

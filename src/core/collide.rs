@@ -138,6 +138,8 @@ enum Fast {
     Plane(Vector),
     /// A box's half extents (parry's precision).
     Cuboid(glam::Vec3),
+    /// A capsule: its axis and radius (parry's precision).
+    Capsule(parry3d::shape::Capsule),
     General,
 }
 
@@ -350,6 +352,8 @@ impl Collider {
             Fast::Plane(h.normal.to_scalar())
         } else if let Some(c) = shape.as_cuboid() {
             Fast::Cuboid(c.half_extents)
+        } else if let Some(c) = shape.as_capsule() {
+            Fast::Capsule(*c)
         } else {
             Fast::General
         };
@@ -481,11 +485,11 @@ impl Collider {
                 let n = (pose.rotation * n).to_scalar();
                 Some((c + (pose.rotation * q).to_scalar() + n * thick, n))
             }
-            Fast::General if let Some(cap) = self.shape.as_capsule() => {
+            Fast::Capsule(cap) => {
                 // Its own: the nearest point of its axis, in its frame (in `f32`, as parry's
                 // projection, which it equals).
                 let local = pose.rotation.inverse() * (p - c).to_f32();
-                let (q, d, dist) = capsule_axis_nearest(cap, local);
+                let (q, d, dist) = capsule_axis_nearest(&cap, local);
                 let r = cap.radius as Scalar;
                 if dist as Scalar >= r + thick {
                     return None;
@@ -585,12 +589,9 @@ impl Collider {
             }
             // A capsule not turning: farther from its axis than its radius and the thickness,
             // by as much.
-            Fast::General if pose.omega == Vector::ZERO => {
-                let Some(cap) = self.shape.as_capsule() else {
-                    return false;
-                };
+            Fast::Capsule(cap) if pose.omega == Vector::ZERO => {
                 let local = pose.rotation.inverse() * (p - pose.origin).to_f32();
-                let (_, _, dist) = capsule_axis_nearest(cap, local);
+                let (_, _, dist) = capsule_axis_nearest(&cap, local);
                 let reach = cap.radius as Scalar + thick + (v - pose.velocity).length() * h;
                 dist as Scalar > reach * 1.0001 + 1e-6
             }
@@ -815,10 +816,8 @@ impl Collider {
             Fast::Plane(_) => false,
             Fast::Sphere(r) => round(r),
             Fast::Cuboid(_) => edge > 0.5 * (3.0 as Scalar).sqrt() * t,
-            Fast::General => match self.shape.as_capsule() {
-                Some(c) => round(c.radius as Scalar),
-                None => edge > 0.5 * (3.0 as Scalar).sqrt() * t,
-            },
+            Fast::Capsule(c) => round(c.radius as Scalar),
+            Fast::General => edge > 0.5 * (3.0 as Scalar).sqrt() * t,
         }
     }
 
@@ -891,11 +890,7 @@ impl Collider {
         let grow = if fastest > thick { 2.0 * fastest } else { 0.0 };
         // A round shape's bound holds over the step too (see `feature_held`): told first, on
         // the positions alone.
-        let round = match self.fast {
-            Fast::Sphere(_) => true,
-            Fast::General => self.shape.as_capsule().is_some(),
-            _ => false,
-        };
+        let round = matches!(self.fast, Fast::Sphere(_) | Fast::Capsule(_));
         let mut pushed = 0;
         for (k, f) in faces.iter().enumerate() {
             // At the end of a step the triangles cover their edges; an edge is tested for
@@ -1180,10 +1175,8 @@ impl Collider {
         match self.fast {
             Fast::Plane(_) => true,
             Fast::Sphere(r) => round(r),
-            Fast::General => self
-                .shape
-                .as_capsule()
-                .is_some_and(|c| round(c.radius as Scalar)),
+            Fast::Capsule(c) => round(c.radius as Scalar),
+            Fast::General => false,
             Fast::Cuboid(half) => {
                 // Each corner's face region (the axis it is out along and on which side), if
                 // it is out along one axis only, and its distance from the box.
@@ -1313,7 +1306,7 @@ impl Collider {
                 let (n, point) = (Vector::from_array(n), Vector::from_array(point));
                 Some((bary_of(point), point, n, dist as Scalar))
             }
-            Fast::General => self.face_contact_parry(shape_pose, reach, tri),
+            Fast::Capsule(_) | Fast::General => self.face_contact_parry(shape_pose, reach, tri),
         }
     }
 

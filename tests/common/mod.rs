@@ -7,6 +7,30 @@ pub mod intersect;
 #[allow(unused_imports)] // not every test file uses the app helpers
 pub use plugin::*;
 
+/// A lying cloth whose border is pinned, a trampoline: 21 × 21 particles of 20 g, 2 m square
+/// (cells of 10 cm, diagonals of 14 cm), at height 0, with no collider.
+pub fn trampoline() -> bevy_soft_body::core::scene::Scene {
+    use bevy_soft_body::core::build::{ClothParams, ClothPins, cloth};
+    let mut scene = cloth(&ClothParams {
+        rows: 21,
+        cols: 21,
+        width: 2.0,
+        height: 2.0,
+        mass: 0.02,
+        k_structural: 3000.0,
+        k_shear: 500.0,
+        k_flex: 100.0,
+        damping: 2.0,
+        drag: 0.05,
+        pins: ClothPins::Border,
+        hanging: false,
+        origin: [0.0, 0.0, 0.0],
+    })
+    .unwrap();
+    scene.colliders.clear();
+    scene
+}
+
 /// A small deterministic generator (xorshift 13/7/17), so the tests need no crate and every
 /// run draws the same numbers.
 pub struct Rng(pub u64);

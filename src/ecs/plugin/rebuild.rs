@@ -341,6 +341,12 @@ pub(crate) fn prepare(
         // surface (for colliders between the particles, and self-collision), unless the body
         // has a surface of its own.
         let mesh_surface = mesh_surface.filter(|_| surface.is_none());
+        // Its triangles when the mesh surface changed (a tear), for the check below and the
+        // rebuild.
+        let mut mesh_tris = mesh_surface
+            .as_ref()
+            .filter(|m| m.is_changed())
+            .map(|m| mesh_triangles(m, plist));
         let slist = slist.map_or(no_list, |s| s.entities());
         let tlist = tlist.map_or(no_list, |t| t.entities());
         let bs = &mut *bs;
@@ -366,12 +372,10 @@ pub(crate) fn prepare(
                             .as_ref()
                             .is_some_and(|sim| sim.system.contact_faces != s.triangles))
             })
-            || mesh_surface.as_ref().is_some_and(|m| {
-                m.is_changed()
-                    && bs
-                        .sim
-                        .as_ref()
-                        .is_some_and(|sim| sim.system.contact_faces != mesh_triangles(m, plist))
+            || mesh_tris.as_ref().is_some_and(|tris| {
+                bs.sim
+                    .as_ref()
+                    .is_some_and(|sim| sim.system.contact_faces != *tris)
             })
             || bs.particles.len() != plist.len()
             || bs.particles.as_slice() != plist;
@@ -438,7 +442,10 @@ pub(crate) fn prepare(
             let wind = wind.map(|w| *w).or(global_wind.0);
             let (tris, from) = match (&surface, &mesh_surface) {
                 (Some(s), _) => (s.triangles.clone(), s.torn_from.clone()),
-                (None, Some(m)) => (mesh_triangles(m, plist), vec![]),
+                (None, Some(m)) => (
+                    mesh_tris.take().unwrap_or_else(|| mesh_triangles(m, plist)),
+                    vec![],
+                ),
                 (None, None) => (vec![], vec![]),
             };
             let fem = FemInput {
