@@ -226,7 +226,9 @@ impl Default for DriverConfig {
 }
 
 /// When a body at rest stops stepping: once every free part has stayed slower than `speed`
-/// for `time` under steady forces ([`OdeSystem::rest_speed`]), its frames cost nothing until
+/// for `time` under steady forces ([`OdeSystem::rest_speed`]; a frame's speed is how far a part
+/// went from the frame's start to its end, over the frame's length: the motion its frames
+/// show), its frames cost nothing until
 /// something wakes it — a frame at whose start the forces are no longer steady (a collider
 /// near it moves, a pin's path moves, a gust or a field that changes with time), or
 /// [`Simulation::wake`] (an edit). A body that wakes must stay still for `time` again before
@@ -235,7 +237,8 @@ impl Default for DriverConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SleepParams {
-    /// Speed (m/s) every free particle must stay below.
+    /// Speed (m/s) every free particle must stay below: how far it goes in a frame, over the
+    /// frame's length.
     pub speed: f64,
     /// How long (s) it must stay below it.
     pub time: f64,
@@ -392,9 +395,14 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         self.still_for = 0.0;
     }
 
-    /// Below the sleep speed under steady forces at `t`.
-    fn at_rest(&self, t: Scalar) -> bool {
-        match (self.sleep, self.system.rest_speed(t, &self.state)) {
+    /// Below the sleep speed under steady forces at `t`, over the frame from `start` to the
+    /// state now (from the state to itself: the forces' steadiness alone).
+    fn at_rest(&self, t: Scalar, start: &S) -> bool {
+        let dt = self.config.frame_dt as Scalar;
+        match (
+            self.sleep,
+            self.system.rest_speed(t, start, &self.state, dt),
+        ) {
             (Some(p), Some(s)) => (s as f64) < p.speed,
             _ => false,
         }
@@ -589,7 +597,7 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
             self.time64 = self.time as f64;
         }
         if self.asleep {
-            if self.at_rest(self.time) {
+            if self.at_rest(self.time, &self.state) {
                 // Nothing moves it: the frame passes without a step.
                 self.time64 = t_end;
                 self.time = t_end as Scalar;
@@ -695,7 +703,8 @@ impl<S: OdeState, Sys: OdeSystem<S>> Simulation<S, Sys> {
         }
         self.frame += 1;
         if let Some(p) = self.sleep {
-            if self.at_rest(self.time) {
+            // `backup` is the frame's start.
+            if self.at_rest(self.time, &self.backup) {
                 self.still_for += self.config.frame_dt;
                 // Within round-off of the time: a whole number of frames reaches it.
                 self.asleep = self.still_for >= p.time - 1e-9 * self.config.frame_dt;

@@ -117,12 +117,13 @@ pub trait OdeSystem<S: OdeState>: Sync {
         state.is_finite()
     }
 
-    /// How fast the system moves in `state` at `t`, for sleeping: the largest speed of a free
-    /// part, when nothing drives it but steady forces (no moving pins or colliders, no gusts,
-    /// no field that changes with time); `None` (the default) when something does, or the
+    /// How fast the system moved over a frame `dt` long from `start` to `end` (at `t`), for
+    /// sleeping: the largest distance a free part went, over `dt` — the speed the frames show
+    /// — when nothing drives it but steady forces (no moving pins or colliders, no gusts, no
+    /// field that changes with time); `None` (the default) when something does, or the
     /// system does not say. A body whose rest speed stays below a threshold for a while
     /// sleeps ([`crate::core::driver::Simulation::set_sleep`]).
-    fn rest_speed(&self, _t: Scalar, _state: &S) -> Option<Scalar> {
+    fn rest_speed(&self, _t: Scalar, _start: &S, _end: &S, _dt: Scalar) -> Option<Scalar> {
         None
     }
 

@@ -517,7 +517,8 @@ impl From<SoftBodyWind> for crate::core::forces::Wind {
 pub struct SoftBodySleep {
     /// Off: no body sleeps.
     pub enabled: bool,
-    /// Speed (m/s) every free particle must stay below.
+    /// Speed (m/s) every free particle must stay below: how far it goes in a frame, over the
+    /// frame's length.
     pub speed: f32,
     /// For this long (s).
     pub time: f32,
