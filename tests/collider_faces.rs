@@ -272,27 +272,9 @@ fn a_cloth_drops_onto_a_sphere_smaller_than_its_cells_and_rests_on_it() {
 /// its energy rising 0.3 mJ over those 5 s.
 #[test]
 fn a_cloth_tented_on_a_ball_smaller_than_its_cells_comes_to_rest() {
-    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
     let r = 0.05;
-    let mut p = ClothPileParams {
-        cloths: 1,
-        radius: r,
-        ..Default::default()
-    }
-    .with_resolution(12);
-    p.self_collision = None;
-    let (model, state) = cloth_pile(&p).unwrap().build().unwrap();
     let frame = 1.0 / 64.0;
-    let mut sim = Simulation::new(
-        model,
-        state,
-        DriverConfig {
-            integrator: IntegratorKind::SymplecticEuler,
-            policy: StepPolicy::Fixed { h: p.stable_step() },
-            frame_dt: frame,
-            ..Default::default()
-        },
-    );
+    let mut sim = common::tent(r, frame);
     let energy = |sim: &Simulation<ParticleState, ParticleModel>| {
         let e = sim.system.energy(sim.time, &sim.state).unwrap();
         (e.kinetic + e.potential) as f64

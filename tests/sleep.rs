@@ -142,7 +142,6 @@ fn a_flag_at_rest_sleeps_after_the_sleep_time_and_its_frames_cost_nothing() {
 
 #[test]
 fn a_coarse_cloth_held_up_by_a_ball_between_its_particles_sleeps() {
-    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
     // The pile's 12² cloth (11 cm cells) dropped onto a 7 cm ball on the ground: the ball
     // meets it inside its triangles and holds it up as a tent. Each step the tension pulls the
     // tent onto the ball and the contact's impulse stops the point of contact; the triangle's
@@ -151,24 +150,7 @@ fn a_coarse_cloth_held_up_by_a_ball_between_its_particles_sleeps() {
     // are. The sleep speed is read from how far the particles go in a frame, so it sleeps;
     // by the particles' velocities at the frames' ends it never would.
     let r = 0.07;
-    let mut p = ClothPileParams {
-        cloths: 1,
-        radius: r,
-        ..Default::default()
-    }
-    .with_resolution(12);
-    p.self_collision = None;
-    let (model, state) = cloth_pile(&p).unwrap().build().unwrap();
-    let mut sim = Simulation::new(
-        model,
-        state,
-        DriverConfig {
-            integrator: IntegratorKind::SymplecticEuler,
-            policy: StepPolicy::Fixed { h: p.stable_step() },
-            frame_dt: FRAME,
-            ..Default::default()
-        },
-    );
+    let mut sim = common::tent(r, FRAME);
     let sp = SleepParams::default();
     sim.set_sleep(Some(sp));
     // Per frame: the speed over the frame (positions) and the fastest end velocity.

@@ -65,6 +65,39 @@ impl Rng {
     }
 }
 
+/// The cloth pile's 12² cloth (1.2 m, cells of 11 cm) dropped from 0.75 m onto a ball of
+/// `radius` resting on the ground, self-collision off: a ball smaller than the cells meets it
+/// inside its triangles and holds it up as a tent. Symplectic Euler at the pile's stable step,
+/// in frames of `frame`.
+pub fn tent(
+    radius: f64,
+    frame: f64,
+) -> bevy_soft_body::core::driver::Simulation<
+    bevy_soft_body::core::ode::ParticleState,
+    bevy_soft_body::core::particles::ParticleModel,
+> {
+    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
+    use bevy_soft_body::prelude::*;
+    let mut p = ClothPileParams {
+        cloths: 1,
+        radius,
+        ..Default::default()
+    }
+    .with_resolution(12);
+    p.self_collision = None;
+    let (model, state) = cloth_pile(&p).unwrap().build().unwrap();
+    Simulation::new(
+        model,
+        state,
+        DriverConfig {
+            integrator: IntegratorKind::SymplecticEuler,
+            policy: StepPolicy::Fixed { h: p.stable_step() },
+            frame_dt: frame,
+            ..Default::default()
+        },
+    )
+}
+
 /// Every number of a scene rounded to `f32`, which the plugin's components hold: the core
 /// then starts from the same values in either precision.
 pub fn f32_exact(s: &mut bevy_soft_body::core::scene::Scene) {
