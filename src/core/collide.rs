@@ -1093,10 +1093,10 @@ impl Collider {
         let along = |d: Vector| dynamic.map_or(0.0, |r| r.inverse_mass_along(arm, d));
         let e = self.restitution_for(vn);
         // With `settle` (the step's length) and no bounce, the approach is stopped only as far
-        // as the push does (a speculative contact: Catto, *Contact manifolds*, GDC 2007): a
-        // point that came from outside the thickness within the step keeps approaching at
-        // what brought it to the thickness and stops in the next step; one that was inside
-        // already stops. The corners then end the step where their velocities say (the push
+        // as the push does (a speculative contact: Firth, *Speculative contacts – a
+        // continuous collision engine approach*, 2011): a point that came from outside the
+        // thickness within the step keeps approaching at what brought it to the thickness
+        // and stops in the next step; one that was inside already stops. The corners then end the step where their velocities say (the push
         // is the impulse's over the step). Stopped whole in the step it arrives, a point
         // took from the corners it shares with a neighbouring contact the velocity that had
         // brought them in, and that neighbour's push then moved them out with no impulse to
