@@ -1096,12 +1096,12 @@ impl Collider {
         // as the push does (a speculative contact: Firth, *Speculative contacts – a
         // continuous collision engine approach*, 2011): a point that came from outside the
         // thickness within the step keeps approaching at what brought it to the thickness
-        // and stops in the next step; one that was inside already stops. The corners then end the step where their velocities say (the push
-        // is the impulse's over the step). Stopped whole in the step it arrives, a point
-        // took from the corners it shares with a neighbouring contact the velocity that had
-        // brought them in, and that neighbour's push then moved them out with no impulse to
-        // match: energy from nowhere, which kept a coarse cloth tented on a small ball
-        // quivering 0.3–1 mm a frame for good. A feature that went through the collider in
+        // and stops in the next step; one that was inside already stops. The corners then end
+        // the step where their velocities say (the push is the impulse's over the step).
+        // Stopped whole in the step it arrives, a point took from the corners it shares with
+        // a neighbouring contact the velocity that had brought them in, and that neighbour's
+        // push then moved them out with no impulse to match: energy from nowhere, which kept
+        // a coarse cloth tented on a small ball quivering 0.3–1 mm a frame for good. A feature that went through the collider in
         // the step (no `settle`) is stopped whole, and so is one meeting a dynamic body: the
         // body moves by the impulses it is given at the frame's end, not along the step, so
         // its side of the contact has no path for the push to follow (a rigid ball resting
