@@ -8,10 +8,15 @@
 //! frame's end is free of intersections between the group's surfaces as well as within them
 //! (tried: pairs between bodies only — the cross-body pushes then left 20 intersecting pairs
 //! within a body in the two-cloth test, and it was no cheaper, the broad phase being the
-//! cost). A frame is long against the thickness, so pairs that came close mid-frame were caught
-//! only by the continuous detection; up to [`SETTLE_PASSES`] passes from where the last one
-//! ended (no motion but their own pushes, checked again by the continuous detection) push
-//! pairs that ended nearer than the thickness apart.
+//! cost). A frame is long against the thickness, so the frame's straight paths are taken in
+//! increments and a pass runs after an increment only when one is due, as a body's own passes
+//! run between its steps ([`SelfContact::advance`]: when some particle has travelled, against
+//! the surfaces' mean motion, half of what its nearest candidate pair may close), and at the
+//! frame's end. Three 32² cloths as three bodies took 27 passes a frame with a pass after
+//! every increment, 16 so, at 204 against 289 ms a frame (docs/BENCHMARKS.md). Pairs that
+//! came close mid-frame were caught only by the continuous detection; up to [`SETTLE_PASSES`]
+//! passes from where the last one ended (no motion but their own pushes, checked again by the
+//! continuous detection) push pairs that ended nearer than the thickness apart.
 //!
 //! The group's thickness is its members' smallest (every member's own bound on the thickness
 //! against its shortest edge then holds for the whole group); its friction the members' mean
@@ -27,9 +32,9 @@ use crate::math::{Scalar, Vector};
 /// pushes nothing.
 pub const SETTLE_PASSES: u32 = 3;
 
-/// Sub-passes a frame's group pass is cut into at most (each covers an even share of what is
-/// left of the straight paths, as many as keep the parts' approach per sub-pass under
-/// [`PASS_TRAVEL`] thicknesses).
+/// Increments a frame's straight paths are cut into at most (each an even share of what is
+/// left of them, as many as keep the parts' approach per increment under [`PASS_TRAVEL`]
+/// thicknesses); a pass runs after those at which one is due, and after the last.
 pub const MAX_SUBPASSES: u32 = 32;
 
 /// One body's part in a group pass.
@@ -64,6 +69,10 @@ pub struct ContactGroup {
     w: Vec<Scalar>,
     target: Vec<Vector>,
     end: Vec<Vector>,
+    /// The increments' velocities along the straight paths, and the members' particles
+    /// resting on colliders.
+    path: Vec<Vector>,
+    support: Vec<bool>,
 }
 
 impl ContactGroup {
@@ -124,15 +133,16 @@ impl ContactGroup {
             self.v.extend_from_slice(m.v);
             self.w.extend_from_slice(m.inv_mass);
         }
-        let support = self.contact.support_mut(self.x.len());
+        self.support.clear();
+        self.support.resize(self.x.len(), false);
         let mut off = 0;
         for m in members.iter() {
             for (i, &s) in m.support.iter().enumerate() {
-                support[off + i] = s;
+                self.support[off + i] = s;
             }
             off += m.x.len();
         }
-        // Sub-passes along the frame's straight paths, so that each sees the surfaces' parts
+        // The frame's straight paths in increments, so that a pass sees the surfaces' parts
         // come at most half a thickness closer (as a body's own passes do): a frame's motion
         // is long against the thickness, and one pass over it would have to pair everything
         // within that motion (measured: 850,000 candidate pairs and 11 s for one pass over
@@ -153,24 +163,33 @@ impl ContactGroup {
         self.target.clear();
         self.target.extend_from_slice(&self.x);
         self.x.copy_from_slice(&self.x0);
+        self.contact.begin_frame(&self.x);
         let mut rep = SelfContactReport::default();
+        let hs = h / subs as Scalar;
         for j in 0..subs {
-            // From where the last sub-pass ended, an even share of what is left to the
-            // target (which takes every correction a sub-pass made).
-            self.x0.copy_from_slice(&self.x);
+            // An even share of what is left to the target (which takes every correction a
+            // pass made), and the velocity that covers it in the increment.
             let left = (subs - j) as Scalar;
+            self.path.clear();
             for (x, t) in self.x.iter_mut().zip(&self.target) {
-                *x += (*t - *x) / left;
+                let d = (*t - *x) / left;
+                *x += d;
+                self.path.push(d / hs);
+            }
+            // A pass when the parts may have come half a thickness closer since the last
+            // (each particle's travel against what its nearest candidate pair may close: see
+            // [`SelfContact::advance`]), and at the frame's end.
+            let due = self.contact.advance(hs, &self.x, &self.path);
+            if !due && j + 1 < subs {
+                continue;
             }
             self.end.clear();
             self.end.extend_from_slice(&self.x);
-            let r = self.contact.resolve(
-                h / subs as Scalar,
-                &self.x0,
-                &mut self.x,
-                &mut self.v,
-                &self.w,
-            );
+            self.contact
+                .support_mut(self.x.len())
+                .copy_from_slice(&self.support);
+            self.contact.pass(&mut self.x, &mut self.v, &self.w);
+            let r = self.contact.last;
             rep.add(&r);
             if r.failed {
                 break;
@@ -179,7 +198,7 @@ impl ContactGroup {
                 *t += *x - *e;
             }
         }
-        let h = h / subs as Scalar;
+        let h = hs;
         // Pairs that came close mid-pass were caught only by the continuous detection (a
         // tenth of the thickness apart): passes from where the last ended (no motion but
         // their own pushes, checked again by the continuous detection) restore the
@@ -188,6 +207,9 @@ impl ContactGroup {
             if rep.failed {
                 break;
             }
+            self.contact
+                .support_mut(self.x.len())
+                .copy_from_slice(&self.support);
             self.x0.copy_from_slice(&self.x);
             let again = self
                 .contact
