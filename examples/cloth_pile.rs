@@ -14,7 +14,7 @@
 //!
 //! The three cloths are one body (`Scene::append`), so their surfaces collide with each other
 //! as well as with themselves. (Separate bodies that each have `SelfCollision` collide with
-//! each other too, through one pass per frame after they have stepped; `--bench` compares the
+//! each other too, resolved once a frame after they have stepped; `--bench` compares the
 //! two.) Keys: Space pause, N step, R reset (drop again), G wireframe;
 //! left drag pulls a cloth, right drag or arrows orbit, wheel zoom. `--screenshot FILE
 //! [--frames N]` renders N frames (default 150: piled at 2.5 s), saves a PNG and exits.
@@ -259,9 +259,9 @@ fn timed(
     (sim, wall, steps)
 }
 
-/// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with one
-/// contact pass per frame between them (`core::body_contact`, what the plugin runs after its
-/// step), against the same pile as one body.
+/// The 3 × 32² pile as three bodies stepped apart (as the plugin steps them), with their
+/// contact resolved once a frame (`core::body_contact`, what the plugin runs after its step:
+/// passes along the frame when due), against the same pile as one body.
 fn bench_bodies(frames: u32) {
     use bevy_soft_body::core::body_contact::{
         ContactGroup, GroupMember, overlapping_groups, swept_box,

@@ -13,7 +13,7 @@
 //! run between its steps ([`SelfContact::advance`]: when some particle has travelled, against
 //! the surfaces' mean motion, half of what its nearest candidate pair may close), and at the
 //! frame's end. Three 32² cloths as three bodies took 27 passes a frame with a pass after
-//! every increment, 16 so, at 204 against 289 ms a frame (docs/BENCHMARKS.md). Pairs that
+//! every increment, 16 so, at 200 against 277 ms a frame (docs/BENCHMARKS.md). Pairs that
 //! came close mid-frame were caught only by the continuous detection; up to [`SETTLE_PASSES`]
 //! passes from where the last one ended (no motion but their own pushes, checked again by the
 //! continuous detection) push pairs that ended nearer than the thickness apart.
