@@ -1101,11 +1101,12 @@ impl Collider {
         // Stopped whole in the step it arrives, a point took from the corners it shares with
         // a neighbouring contact the velocity that had brought them in, and that neighbour's
         // push then moved them out with no impulse to match: energy from nowhere, which kept
-        // a coarse cloth tented on a small ball quivering 0.3–1 mm a frame for good. A feature that went through the collider in
-        // the step (no `settle`) is stopped whole, and so is one meeting a dynamic body: the
-        // body moves by the impulses it is given at the frame's end, not along the step, so
-        // its side of the contact has no path for the push to follow (a rigid ball resting
-        // on a trampoline kept 2.5 cm/s so, 4 mm/s stopped whole).
+        // a coarse cloth tented on a small ball quivering 0.3–1 mm a frame for good. A feature
+        // that went through the collider in the step (no `settle`) is stopped whole, and so
+        // is one meeting a dynamic body: the body moves by the impulses it is given at the
+        // frame's end, not along the step, so its side of the contact has no path for the
+        // push to follow (a rigid ball resting on a trampoline kept 2.5 cm/s so, 4 mm/s
+        // stopped whole).
         let stop = match settle {
             Some(h) if e == 0.0 && dynamic.is_none() => {
                 (-vn).min(part * depth / h.max(Scalar::MIN_POSITIVE))
