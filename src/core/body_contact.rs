@@ -12,11 +12,12 @@
 //! increments and a pass runs after an increment only when one is due, as a body's own passes
 //! run between its steps ([`SelfContact::advance`]: when some particle has travelled, against
 //! the surfaces' mean motion, half of what its nearest candidate pair may close), and at the
-//! frame's end. Three 32² cloths as three bodies took 27 passes a frame with a pass after
-//! every increment, 16 so, at 200 against 277 ms a frame (docs/BENCHMARKS.md). Pairs that
-//! came close mid-frame were caught only by the continuous detection; up to [`SETTLE_PASSES`]
-//! passes from where the last one ended (no motion but their own pushes, checked again by the
-//! continuous detection) push pairs that ended nearer than the thickness apart.
+//! frame's end. Three 32² cloths as three bodies took 27 passes a group pass with a pass
+//! after every increment, 16 so, at 200 against 277 ms a group pass (0.92 a frame;
+//! docs/BENCHMARKS.md). Pairs that came close mid-frame were caught only by the continuous
+//! detection; up to [`SETTLE_PASSES`] passes from where the last one ended (no motion but
+//! their own pushes, checked again by the continuous detection) push pairs that ended nearer
+//! than the thickness apart.
 //!
 //! The group's thickness is its members' smallest (every member's own bound on the thickness
 //! against its shortest edge then holds for the whole group); its friction the members' mean
@@ -185,9 +186,7 @@ impl ContactGroup {
             }
             self.end.clear();
             self.end.extend_from_slice(&self.x);
-            self.contact
-                .support_mut(self.x.len())
-                .copy_from_slice(&self.support);
+            self.lend_support();
             self.contact.pass(&mut self.x, &mut self.v, &self.w);
             let r = self.contact.last;
             rep.add(&r);
@@ -198,7 +197,6 @@ impl ContactGroup {
                 *t += *x - *e;
             }
         }
-        let h = hs;
         // Pairs that came close mid-pass were caught only by the continuous detection (a
         // tenth of the thickness apart): passes from where the last ended (no motion but
         // their own pushes, checked again by the continuous detection) restore the
@@ -207,13 +205,11 @@ impl ContactGroup {
             if rep.failed {
                 break;
             }
-            self.contact
-                .support_mut(self.x.len())
-                .copy_from_slice(&self.support);
+            self.lend_support();
             self.x0.copy_from_slice(&self.x);
             let again = self
                 .contact
-                .resolve(h, &self.x0, &mut self.x, &mut self.v, &self.w);
+                .resolve(hs, &self.x0, &mut self.x, &mut self.v, &self.w);
             rep.add(&again);
             if again.separated == 0 {
                 break;
@@ -228,6 +224,14 @@ impl ContactGroup {
             off += n;
         }
         rep
+    }
+
+    /// Marks the members' particles resting on colliders for the next pass (a pass clears
+    /// its marks).
+    fn lend_support(&mut self) {
+        self.contact
+            .support_mut(self.support.len())
+            .copy_from_slice(&self.support);
     }
 }
 
