@@ -7,6 +7,7 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+use bevy_soft_body::core::collide::NormalHolds;
 use bevy_soft_body::core::integrate::{BackwardEuler, Integrator};
 use bevy_soft_body::core::jacobian::Linearization;
 use bevy_soft_body::core::scene::{ParticleDesc, SpringDesc};
@@ -383,6 +384,144 @@ fn filtered_pcg_equals_the_projected_reduced_solve() {
             (got - xr[k]).abs() <= 100.0 * tol * scale,
             "dof {r}: {got} vs {}",
             xr[k]
+        );
+    }
+}
+
+/// Two unit vectors spanning the plane normal to unit `n`.
+fn plane_basis(n: [f64; 3]) -> [[f64; 3]; 2] {
+    let a = if n[0].abs() < 0.6 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let d = a[0] * n[0] + a[1] * n[1] + a[2] * n[2];
+    let u = [a[0] - d * n[0], a[1] - d * n[1], a[2] - d * n[2]];
+    let l = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+    let u = u.map(|c| c / l);
+    let w = [
+        n[1] * u[2] - n[2] * u[1],
+        n[2] * u[0] - n[0] * u[2],
+        n[0] * u[1] - n[1] * u[0],
+    ];
+    [u, w]
+}
+
+#[test]
+fn direction_filtered_pcg_equals_the_solve_on_the_free_directions() {
+    // Particles held along a direction (a contact normal) keep their starting value's part
+    // along it and are free across it. The reference: with `U` a basis of the free directions
+    // (three axes per free particle, the plane normal to `n` per held one, none for the pin),
+    // `x = x₀ + U y` with `(Uᵀ A U) y = Uᵀ (b − A x₀)`, by dense elimination.
+    let (model, st) = network(5, true);
+    let n = st.len();
+    let h = 0.02 as Scalar;
+    let mut a: SpringMatrix = model.new_matrix();
+    let mut kv = vec![Vector::ZERO; n];
+    model.assemble(&st, h, true, &mut a, &mut kv);
+    let mut mask = vec![0.0; n];
+    model.free_mask(&mut mask);
+    let b: Vec<Vector> = (0..n)
+        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
+        .collect();
+    // Particles 2 and 5 held along unit normals (their prescribed parts in the start value),
+    // particle 6 along two.
+    let mut r = 99u64;
+    let mut unit = || {
+        let v = [lcg(&mut r) - 0.5, lcg(&mut r) - 0.5, lcg(&mut r) - 0.5];
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        v.map(|c| c / l)
+    };
+    let (n2, n5) = (unit(), unit());
+    let n6 = [unit(), unit()];
+    let mut holds = NormalHolds::default();
+    let vec = |v: [f64; 3]| Vector::new(v[0] as Scalar, v[1] as Scalar, v[2] as Scalar);
+    holds.raw.push((2, vec(n2), vec(n2) * 0.7));
+    holds.raw.push((5, vec(n5), vec(n5) * -1.3));
+    holds.raw.push((6, vec(n6[0]), Vector::ZERO));
+    holds.raw.push((6, vec(n6[1]), Vector::ZERO));
+    let mut x0 = vec![Vector::ZERO; n];
+    holds.settle(None, &mut x0);
+    assert_eq!(holds.filters.len(), 3);
+
+    // The free basis, as dense columns.
+    let mut cols: Vec<Vec<f64>> = vec![];
+    let mut put = |i: usize, d: [f64; 3]| {
+        let mut c = vec![0.0; 3 * n];
+        c[3 * i..3 * i + 3].copy_from_slice(&d);
+        cols.push(c);
+    };
+    // Particle 6's plane: normal to both its directions.
+    let [p, q] = n6;
+    let c6 = [
+        p[1] * q[2] - p[2] * q[1],
+        p[2] * q[0] - p[0] * q[2],
+        p[0] * q[1] - p[1] * q[0],
+    ];
+    let l6 = (c6[0] * c6[0] + c6[1] * c6[1] + c6[2] * c6[2]).sqrt();
+    for (i, m) in mask.iter().enumerate() {
+        match i {
+            _ if *m == 0.0 => {}
+            2 => plane_basis(n2).into_iter().for_each(|d| put(i, d)),
+            5 => plane_basis(n5).into_iter().for_each(|d| put(i, d)),
+            6 => put(i, c6.map(|c| c / l6)),
+            _ => (0..3).for_each(|k| {
+                let mut d = [0.0; 3];
+                d[k] = 1.0;
+                put(i, d)
+            }),
+        }
+    }
+    let dense = a.to_dense();
+    let x0f: Vec<f64> = x0
+        .iter()
+        .flat_map(|v| (0..3).map(|k| v[k] as f64))
+        .collect();
+    let res: Vec<f64> = (0..3 * n)
+        .map(|r| b[r / 3][r % 3] as f64 - (0..3 * n).map(|c| dense[r][c] * x0f[c]).sum::<f64>())
+        .collect();
+    let au: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|u| {
+            (0..3 * n)
+                .map(|r| (0..3 * n).map(|c| dense[r][c] * u[c]).sum())
+                .collect()
+        })
+        .collect();
+    let ar: Vec<Vec<f64>> = cols
+        .iter()
+        .map(|u| {
+            au.iter()
+                .map(|av| (0..3 * n).map(|r| u[r] * av[r]).sum())
+                .collect()
+        })
+        .collect();
+    let br: Vec<f64> = cols
+        .iter()
+        .map(|u| (0..3 * n).map(|r| u[r] * res[r]).sum())
+        .collect();
+    let y = dense_solve(ar, br);
+    let mut xr = x0f.clone();
+    for (u, yk) in cols.iter().zip(&y) {
+        for r in 0..3 * n {
+            xr[r] += u[r] * yk;
+        }
+    }
+    let scale = xr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let tol = if F64 { 1e-10 } else { 1e-5 };
+    // Filtered solves take block-Jacobi whatever the preconditioner asked for.
+    let mut pcg = Pcg::new(tol as Scalar, 200).with_preconditioner(Preconditioner::Multigrid);
+    let mut x = x0.clone();
+    let rep = pcg.solve_filtered(&a, &b, &mut x, &mask, &holds.filters);
+    println!("{rep:?}");
+    assert!(rep.converged, "{rep:?}");
+    assert_eq!(pcg.active_preconditioner(), Preconditioner::BlockJacobi);
+    for r in 0..3 * n {
+        let got = x[r / 3][r % 3] as f64;
+        assert!(
+            (got - xr[r]).abs() <= 100.0 * tol * scale,
+            "dof {r}: {got} vs {}",
+            xr[r]
         );
     }
 }

@@ -16,7 +16,7 @@
 
 use crate::core::kernels::{SharedMut, for_each_range};
 use crate::core::motion::Motion;
-use crate::math::{Scalar, ToScalar, Vector, VectorExt};
+use crate::math::{Matrix3, Scalar, ToScalar, Vector, VectorExt};
 use parry3d::math::{Pose3, Rot3};
 pub use parry3d::shape::SharedShape;
 use serde::{Deserialize, Serialize};
@@ -644,6 +644,156 @@ impl Collider {
                 }
             }
         }
+    }
+
+    /// The triangles' form of [`Collider::hold`], for a surface whose cells are wider than
+    /// the collider needs ([`Collider::needs_faces`]): a triangle within the thickness plus
+    /// `slack` of the collider at time `t` rests on it at its closest point, and each of its
+    /// corners that is not moving away from the collider's surface there along the contact
+    /// normal and is pushed towards it by `f` (its total force) is held along that normal for
+    /// the step (Baraff and Witkin's constraint filter with one constrained direction: the
+    /// corner stays free to slide and to be pulled across). Pushes each such corner, the
+    /// normal and the surface's velocity at the contact onto `out`; the caller turns them
+    /// into filters ([`NormalHolds::settle`]). Particles with `mask` zero (pinned, or already
+    /// held whole) are left out. A collider with a [`Response`] holds nothing, as in
+    /// [`Collider::hold`]: its body would never feel the constraint's force.
+    ///
+    /// An implicit step that instead let its springs pull a cloth's corners round a rod
+    /// about as wide as its cells, and pushed the triangles back out after the step, did
+    /// work against the stretched springs at every step: the cloth stayed wedged on the rod.
+    #[allow(clippy::too_many_arguments)]
+    pub fn hold_faces(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        slack: Scalar,
+        faces: &[[u32; 3]],
+        edge: Scalar,
+        x: &[Vector],
+        v: &[Vector],
+        f: &[Vector],
+        inv_mass: &[Scalar],
+        mask: &[Scalar],
+        out: &mut Vec<(u32, Vector, Vector)>,
+    ) {
+        if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) {
+            return;
+        }
+        let pose = self.pose(t);
+        let thick = self.material.thickness as Scalar + slack;
+        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        let clear = self.face_filter(&pose, &shape_pose, thick, edge);
+        let n = x
+            .len()
+            .min(v.len())
+            .min(f.len())
+            .min(inv_mass.len())
+            .min(mask.len());
+        for face in faces {
+            let ids = face.map(|i| i as usize);
+            if ids[0].max(ids[1]).max(ids[2]) >= n {
+                continue;
+            }
+            let tri = ids.map(|i| x[i]);
+            if clear(tri, 0.0) || self.feature_held(&pose, thick, tri, None) {
+                continue;
+            }
+            let Some((_, point, nrm, dist)) = self.face_contact(&pose, &shape_pose, thick, tri)
+            else {
+                continue;
+            };
+            let vc = Self::surface_velocity(&pose, point);
+            // A triangle that may cross more than the thickness in the step is not held: the
+            // contact after the step knows the side it came from (`resolve_faces`' swept
+            // test), and a corner held along the normal it has now stops short of where
+            // that puts it (a cloth thrown at a rod at 10 m/s in frame-long steps then ended
+            // a frame 0.1 mm from the rod). Should the step take it in, the trial holds it.
+            if ids.iter().any(|&i| (v[i] - vc).length() * h > thick) {
+                continue;
+            }
+            // Approaching no faster than it does, and not past the thickness.
+            let allowed = -(dist - thick + slack).max(0.0) / h;
+            for i in ids {
+                let vn = (v[i] - vc).dot(nrm);
+                if inv_mass[i] != 0.0 && mask[i] != 0.0 && vn <= 0.0 && f[i].dot(nrm) <= 0.0 {
+                    out.push((i as u32, nrm, vc + nrm * vn.max(allowed)));
+                }
+            }
+        }
+    }
+
+    /// The second look of an implicit step at the triangles ([`Collider::hold_faces`] was
+    /// the first): `trial` holds where a solve would end the step (at `t + h`), `x0` and
+    /// `v` the particles at its start `t`. Each triangle the trial leaves nearer the
+    /// collider than its thickness, by more than a hundredth of it, is met at the step's
+    /// start (its nearest point, normal `n` and distance `d₀` there); each of its corners
+    /// that the trial moves along `n` slower than `−(d₀ − thickness)⁺ / h` relative to the
+    /// collider's surface is held along `n` at that velocity, so the triangle arrives at
+    /// the thickness instead of going in (an active set: the caller solves again with the
+    /// holds). Returns how many holds it pushed onto `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn hold_faces_trial(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        faces: &[[u32; 3]],
+        edge: Scalar,
+        x0: &[Vector],
+        trial: &[Vector],
+        inv_mass: &[Scalar],
+        mask: &[Scalar],
+        out: &mut Vec<(u32, Vector, Vector)>,
+    ) -> usize {
+        if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) || h <= 0.0 {
+            return 0;
+        }
+        let (start, end) = (self.pose(t), self.pose(t + h));
+        let thick = self.material.thickness as Scalar;
+        let pose_of = |p: &Pose| Pose3::from_parts(p.origin.to_f32(), p.rotation);
+        let (shape_start, shape_end) = (pose_of(&start), pose_of(&end));
+        let clear = self.face_filter(&end, &shape_end, thick, edge);
+        let n = x0
+            .len()
+            .min(trial.len())
+            .min(inv_mass.len())
+            .min(mask.len());
+        let before = out.len();
+        for face in faces {
+            let ids = face.map(|i| i as usize);
+            if ids[0].max(ids[1]).max(ids[2]) >= n {
+                continue;
+            }
+            let tri = ids.map(|i| trial[i]);
+            if clear(tri, 0.0) || self.feature_held(&end, thick, tri, None) {
+                continue;
+            }
+            let Some((_, _, _, dist)) = self.face_contact(&end, &shape_end, thick, tri) else {
+                continue;
+            };
+            if thick - dist <= 0.01 * thick {
+                continue;
+            }
+            // Met at the start within what its corners travelled (and the thickness).
+            let travel = ids
+                .map(|i| (trial[i] - x0[i]).length())
+                .into_iter()
+                .fold(0.0, Scalar::max);
+            let tri0 = ids.map(|i| x0[i]);
+            let reach = thick + 2.0 * travel;
+            let Some((_, point, nrm, d0)) = self.face_contact(&start, &shape_start, reach, tri0)
+            else {
+                continue;
+            };
+            let vc = Self::surface_velocity(&start, point);
+            let allowed = -(d0 - thick).max(0.0) / h;
+            for i in ids {
+                let vi = (trial[i] - x0[i]) / h;
+                if inv_mass[i] != 0.0 && mask[i] != 0.0 && (vi - vc).dot(nrm) < allowed {
+                    out.push((i as u32, nrm, vc + nrm * allowed));
+                }
+            }
+        }
+        out.len() - before
     }
 
     /// Marks in `out` the particles within the collider's thickness plus `slack` of it at
@@ -1552,6 +1702,86 @@ pub const FACE_SWEEPS: u32 = 32;
 /// Particles a chunk of [`resolve_all`] holds on the team (about ten microseconds of work
 /// against a sphere and the ground; smaller under Miri).
 const RESOLVE_CHUNK: usize = crate::core::kernels::chunk_limit(512, 64);
+
+/// Particles held along contact normals for one implicit step: Baraff and Witkin's
+/// constraint filter (*Large steps in cloth simulation*, 1998, §5.3) with one or two
+/// constrained directions per particle, each with its prescribed velocity along it. The raw
+/// holds ([`Collider::hold_faces`], [`Collider::hold_faces_trial`]), and the filters the
+/// linear solve takes
+/// ([`LinearSolver::solve_filtered`](crate::core::solve::LinearSolver::solve_filtered)). Kept
+/// by the integrator, so a step allocates nothing once the lists have grown.
+#[derive(Clone, Debug, Default)]
+pub struct NormalHolds {
+    /// Each hold: the particle, the contact's unit normal, and a velocity whose component
+    /// along the normal is the particle's prescribed velocity along it for the step.
+    pub raw: Vec<(u32, Vector, Vector)>,
+    /// Each particle held and the projector `S = I − Σ eₖeₖᵀ` onto the directions it stays
+    /// free in (zero when it is held along three), by particle.
+    pub filters: Vec<(u32, Matrix3)>,
+    /// The positions a trial solve would end the step at (scratch).
+    pub trial: Vec<Vector>,
+    /// The last round's answer, kept while the next is solved (scratch).
+    pub kept: Vec<Vector>,
+}
+
+impl NormalHolds {
+    /// Directions of one particle within this of the span of those already held (|sin|
+    /// below a quarter, 14.5°) are taken as the same direction.
+    const DISTINCT: Scalar = 0.25;
+
+    /// Forgets the last step's holds.
+    pub fn clear(&mut self) {
+        self.raw.clear();
+        self.filters.clear();
+    }
+
+    /// True when nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.raw.is_empty()
+    }
+
+    /// Turns [`NormalHolds::raw`] into [`NormalHolds::filters`] and writes each held
+    /// particle's prescribed part into a solve's starting guess `x`, which the filtered
+    /// solve keeps: each particle's normals made orthonormal (Gram–Schmidt, in a fixed
+    /// order), its guess along them `vₚ − base` with `vₚ` its first hold's velocity. `base` is
+    /// the particles' velocities when the solve's unknown is a change of velocity (linearly
+    /// implicit Euler's `Δv`), `None` when it is the velocity itself.
+    pub fn settle(&mut self, base: Option<&[Vector]>, x: &mut [Vector]) {
+        self.filters.clear();
+        // By particle, then by normal: the same list gives the same filters, whatever order
+        // the colliders and faces pushed them in.
+        self.raw.sort_unstable_by(|a, b| {
+            let key = |h: &(u32, Vector, Vector)| (h.0, h.1.to_array().map(|c| c.to_bits()));
+            key(a).cmp(&key(b))
+        });
+        let mut k = 0;
+        while k < self.raw.len() {
+            let (i, _, vp) = self.raw[k];
+            let mut e: [Vector; 3] = [Vector::ZERO; 3];
+            let mut rank = 0;
+            while k < self.raw.len() && self.raw[k].0 == i {
+                let nrm = self.raw[k].1;
+                k += 1;
+                if rank == 3 {
+                    continue;
+                }
+                let u = e[..rank].iter().fold(nrm, |u, ek| u - *ek * ek.dot(nrm));
+                let len = u.length();
+                if len > Self::DISTINCT {
+                    e[rank] = u / len;
+                    rank += 1;
+                }
+            }
+            let i = i as usize;
+            let outer = |d: Vector| Matrix3::from_cols(d * d.x, d * d.y, d * d.z);
+            let held = e[..rank].iter().fold(Matrix3::ZERO, |m, &d| m + outer(d));
+            let s = Matrix3::IDENTITY - held;
+            let target = vp - base.map_or(Vector::ZERO, |b| b[i]);
+            x[i] = s * x[i] + held * target;
+            self.filters.push((i as u32, s));
+        }
+    }
+}
 
 /// Every collider's [`Collider::resolve`], in order, at the end `t` of a step of length `h`.
 /// When none of them takes impulses back (no [`Response`]: each particle's response is its

@@ -10,6 +10,7 @@
 //!   implicit steps leave it out, as Baraff & Witkin do (it is still exact here for tests);
 //! - drag and wind: `∂f_i/∂v_i = −c I`.
 
+use crate::core::collide::NormalHolds;
 use crate::core::forces::PackedSpring;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
@@ -288,6 +289,37 @@ pub trait Linearization: Sync {
     fn hold_contacts(&self, t: Scalar, state: &mut ParticleState, mask: &mut [Scalar]) {
         let _ = (t, state, mask);
     }
+    /// Holds the corners of triangles resting on colliders along the contact normals for
+    /// the step ([`Collider::hold_faces`](crate::core::collide::Collider::hold_faces)):
+    /// fills `holds`' raw list (cleared first); `f` is the total force at the step's start.
+    /// Returns true when something is held. None by default.
+    fn hold_faces(
+        &self,
+        (t, h): (Scalar, Scalar),
+        state: &ParticleState,
+        f: &[Vector],
+        mask: &[Scalar],
+        holds: &mut NormalHolds,
+    ) -> bool {
+        let _ = (t, h, state, f, mask);
+        holds.clear();
+        false
+    }
+    /// Adds to `holds` the corners of triangles that the trial end of the step in
+    /// `holds.trial` takes into colliders
+    /// ([`Collider::hold_faces_trial`](crate::core::collide::Collider::hold_faces_trial));
+    /// `state` is the step's start. Returns true when it added any. None by default.
+    fn hold_faces_trial(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        state: &ParticleState,
+        mask: &[Scalar],
+        holds: &mut NormalHolds,
+    ) -> bool {
+        let _ = (t, h, state, mask, holds);
+        false
+    }
     /// True when the system has elements whose semi-definite projection is costly (tets: a
     /// 9×9 eigen-decomposition each). Implicit methods then first try the exact element
     /// Hessians (springs still clamped) and project only when the solve reports an indefinite
@@ -486,6 +518,68 @@ impl Linearization for ParticleModel {
                 *m = 0.0;
             }
         }
+    }
+
+    fn hold_faces(
+        &self,
+        (t, h): (Scalar, Scalar),
+        state: &ParticleState,
+        f: &[Vector],
+        mask: &[Scalar],
+        holds: &mut NormalHolds,
+    ) -> bool {
+        holds.clear();
+        if !self.hold_faces || self.contact_faces.is_empty() || self.colliders.is_empty() {
+            return false;
+        }
+        for c in &self.colliders {
+            // A fiftieth of the thickness of slack: a triangle whose corners the last step
+            // held at the thickness is resting on the collider, though its nearest point may
+            // have come out a little (each corner is held along one normal).
+            let slack = 0.02 * c.material.thickness as Scalar;
+            c.hold_faces(
+                t,
+                h,
+                slack,
+                &self.contact_faces,
+                self.face_edge,
+                &state.x,
+                &state.v,
+                f,
+                self.inv_mass(),
+                mask,
+                &mut holds.raw,
+            );
+        }
+        !holds.is_empty()
+    }
+
+    fn hold_faces_trial(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        state: &ParticleState,
+        mask: &[Scalar],
+        holds: &mut NormalHolds,
+    ) -> bool {
+        if !self.hold_faces || self.contact_faces.is_empty() || self.colliders.is_empty() {
+            return false;
+        }
+        let mut added = 0;
+        for c in &self.colliders {
+            added += c.hold_faces_trial(
+                t,
+                h,
+                &self.contact_faces,
+                self.face_edge,
+                &state.x,
+                &holds.trial,
+                self.inv_mass(),
+                mask,
+                &mut holds.raw,
+            );
+        }
+        added > 0
     }
 
     fn assemble_elements(

@@ -52,9 +52,18 @@ pub struct ParticleModel {
     /// particles alone touch colliders); tested only against colliders that can come between
     /// a surface's particles, see [`Collider::needs_faces`].
     pub contact_faces: Vec<[u32; 3]>,
+    /// Implicit steps with a solver that filters directions (PCG) hold the corners of
+    /// triangles resting on colliders, or that the step would take into them, along the
+    /// contact normals inside the solve
+    /// ([`Linearization::hold_faces`](crate::core::jacobian::Linearization::hold_faces)),
+    /// instead of leaving them wholly to the contact after the step, which on a rod as wide
+    /// as the cells left a cloth wedged (docs/BENCHMARKS.md, "holding triangles inside the
+    /// implicit solve"). On by default ([`ParticleModel::new`]); off, a step in contact costs
+    /// about half as much.
+    pub hold_faces: bool,
     /// The longest edge of [`ParticleModel::contact_faces`] at the frame's start, times
     /// [`FACE_EDGE_GROWTH`] (infinite until measured).
-    face_edge: Scalar,
+    pub(crate) face_edge: Scalar,
     /// The features colliders touch between the particles: [`ParticleModel::contact_faces`],
     /// then each of their edges once, as a triangle `[a, b, b]` (see
     /// [`Collider::resolve_faces`]); made from `features_for`, a copy of the faces they were
@@ -298,6 +307,7 @@ impl ParticleModel {
             mass,
             inv_mass,
             face_edge: Scalar::INFINITY,
+            hold_faces: true,
             ..Default::default()
         }
     }

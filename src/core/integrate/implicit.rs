@@ -1,10 +1,11 @@
 //! Implicit methods for stiff particle systems.
 
 use super::{Integrator, IntegratorKind, IntegratorStats, StepError, check_h};
+use crate::core::collide::NormalHolds;
 use crate::core::jacobian::Linearization;
 use crate::core::ode::{OdeState, OdeSystem, ParticleState};
 use crate::core::solve::{LinearSolver, Pcg, PcgReport, SpringMatrix};
-use crate::math::{Scalar, Vector};
+use crate::math::{Matrix3, Scalar, Vector};
 
 /// What every implicit step starts with: the step size checked, the system's linearization
 /// and the state's particles found (or the error saying which is missing), the matrix rebuilt
@@ -62,6 +63,7 @@ pub struct LinearlyImplicitEuler {
     rhs: Vec<Vector>,
     dv: Vec<Vector>,
     mask: Vec<Scalar>,
+    holds: NormalHolds,
     last: PcgReport,
     stats: IntegratorStats,
 }
@@ -77,6 +79,7 @@ impl Default for LinearlyImplicitEuler {
             rhs: vec![],
             dv: vec![],
             mask: vec![],
+            holds: NormalHolds::default(),
             last: PcgReport::default(),
             stats: IntegratorStats::default(),
         }
@@ -112,6 +115,7 @@ pub struct ImplicitDampingTrapezoid {
     rhs: Vec<Vector>,
     v1: Vec<Vector>,
     mask: Vec<Scalar>,
+    holds: NormalHolds,
     last: PcgReport,
     stats: IntegratorStats,
 }
@@ -150,6 +154,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
+        lin.hold_faces((t, h), ps, &self.f, &self.mask, &mut self.holds);
         lin.assemble_damping(ps, h, a);
         let m = lin.masses();
         for i in 0..n {
@@ -157,8 +162,22 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             // Warm start from vⁿ; constrained entries keep their velocity.
             self.v1[i] = ps.v[i];
         }
-        self.last = self.pcg.solve(a, &self.rhs, &mut self.v1, &self.mask);
-        self.stats.linear_solves += 1;
+        // Triangles resting on colliders, or that the step would take into them: their
+        // corners held along the normals inside the solve.
+        let (pcg, rhs, mask) = (&mut self.pcg, &self.rhs, &self.mask);
+        let (x, v) = (&ps.x, &ps.v);
+        self.last = solve_holding(
+            lin,
+            (t, h),
+            ps,
+            mask,
+            &mut self.holds,
+            None,
+            &mut self.v1,
+            |i, v1| x[i] + (v[i] + v1) * (0.5 * h * mask[i]),
+            |filters, v1| pcg.solve_filtered(a, rhs, v1, mask, filters),
+            &mut self.stats,
+        );
         if self.last.failed {
             return Err(StepError::SolverFailed(
                 IntegratorKind::ImplicitDampingTrapezoid,
@@ -172,11 +191,72 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
         }
         self.stats.steps += 1;
         self.stats.evaluations += 1;
-        self.stats.linear_iterations += self.last.iterations as u64;
         Ok(h)
     }
 
     counters!();
+}
+
+/// Rounds of [`solve_holding`] after its first solve, each adding the triangles the last
+/// trial took into colliders.
+const HOLD_ROUNDS: u32 = 3;
+
+/// A step's linear solve with triangles' corners held along contact normals (Baraff and
+/// Witkin's filter, see [`NormalHolds`]), as an active set: the holds `hold_faces` found at
+/// the step's start; then, while the solve's trial end of the step (`end(i, xᵢ)`: particle
+/// `i`'s position for unknown `xᵢ`) takes triangles into colliders, those are held as well
+/// and the system solved again from the last answer (at most [`HOLD_ROUNDS`] times). `base`
+/// is what [`NormalHolds::settle`] takes. Counts each solve in `stats`.
+#[allow(clippy::too_many_arguments)]
+fn solve_holding(
+    lin: &dyn Linearization,
+    (t, h): (Scalar, Scalar),
+    ps: &ParticleState,
+    mask: &[Scalar],
+    holds: &mut NormalHolds,
+    base: Option<&[Vector]>,
+    x: &mut [Vector],
+    end: impl Fn(usize, Vector) -> Vector,
+    mut solve: impl FnMut(&[(u32, Matrix3)], &mut [Vector]) -> PcgReport,
+    stats: &mut IntegratorStats,
+) -> PcgReport {
+    holds.settle(base, x);
+    let mut report = solve(&holds.filters, x);
+    stats.linear_solves += 1;
+    stats.linear_iterations += report.iterations as u64;
+    if report.failed && !holds.filters.is_empty() {
+        // Round-off can end a filtered solve that needs hundreds of iterations with a
+        // non-positive curvature: solved without the holds instead, as before them (the
+        // contact after the step still stops what goes in).
+        holds.clear();
+        report = solve(&[], x);
+        stats.linear_solves += 1;
+        stats.linear_iterations += report.iterations as u64;
+    }
+    let n = lin.particles().min(x.len());
+    for _ in 0..HOLD_ROUNDS {
+        if report.failed {
+            break;
+        }
+        holds.trial.clear();
+        holds.trial.extend((0..n).map(|i| end(i, x[i])));
+        if !lin.hold_faces_trial(t, h, ps, mask, holds) {
+            break;
+        }
+        // A round that does not converge keeps the last answer.
+        holds.kept.clear();
+        holds.kept.extend_from_slice(&x[..n]);
+        holds.settle(base, x);
+        let next = solve(&holds.filters, x);
+        stats.linear_solves += 1;
+        stats.linear_iterations += next.iterations as u64;
+        if next.failed || !next.converged && report.converged {
+            x[..n].copy_from_slice(&holds.kept);
+            break;
+        }
+        report = next;
+    }
+    report
 }
 
 impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImplicitEuler {
@@ -205,6 +285,15 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
             v.resize(n, Vector::ZERO);
         }
         lin.total_forces(t, ps, &mut self.f0);
+        // Triangles resting on colliders, or that the step would take into them: their
+        // corners held along the normals inside the solve, where the solver can filter
+        // directions (PCG; the Cholesky leaves them to the contact after the step).
+        let filtering = self.solver.filters();
+        if filtering {
+            lin.hold_faces((t, h), ps, &self.f0, &self.mask, &mut self.holds);
+        } else {
+            self.holds.clear();
+        }
         // Elements with a costly projection (tets): try their exact Hessians first, project
         // only if the matrix turns out indefinite.
         let lazy = self.definite && lin.has_costly_projection();
@@ -221,8 +310,31 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 // constrained particles): consecutive steps change velocity similarly.
                 self.dv[i] *= self.mask[i];
             }
-            self.last = self.solver.solve(a, &self.rhs, &mut self.dv, &self.mask);
-            self.stats.linear_solves += 1;
+            let (solver, rhs, mask) = (&mut self.solver, &self.rhs, &self.mask);
+            self.last = if filtering {
+                let (x, v) = (&ps.x, &ps.v);
+                solve_holding(
+                    lin,
+                    (t, h),
+                    ps,
+                    mask,
+                    &mut self.holds,
+                    Some(v),
+                    &mut self.dv,
+                    |i, dv| x[i] + (v[i] + dv) * (h * mask[i]),
+                    |filters, dv| {
+                        solver
+                            .solve_filtered(a, rhs, dv, mask, filters)
+                            .unwrap_or_else(|| solver.solve(a, rhs, dv, mask))
+                    },
+                    &mut self.stats,
+                )
+            } else {
+                self.stats.linear_solves += 1;
+                let report = solver.solve(a, rhs, &mut self.dv, mask);
+                self.stats.linear_iterations += report.iterations as u64;
+                report
+            };
             if !self.last.failed {
                 break;
             }
@@ -241,7 +353,6 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         self.stats.steps += 1;
         self.stats.evaluations += 1;
-        self.stats.linear_iterations += self.last.iterations as u64;
         Ok(h)
     }
 

@@ -608,6 +608,29 @@ impl LinearSolver {
         }
     }
 
+    /// [`LinearSolver::solve`] with some particles constrained along directions only
+    /// (`filters`: a particle and the projector `S = I − Σ nₖnₖᵀ` onto the directions it is
+    /// free in; [`Pcg::solve_filtered`]). `None` from the sparse Cholesky, which
+    /// eliminates whole particles only: the caller then solves without them.
+    pub fn solve_filtered(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) -> Option<SolveReport> {
+        match self {
+            LinearSolver::Pcg(p) => Some(p.solve_filtered(a, b, x, mask, filters)),
+            LinearSolver::Cholesky(_) => None,
+        }
+    }
+
+    /// True when [`LinearSolver::solve_filtered`] takes filters (PCG).
+    pub fn filters(&self) -> bool {
+        matches!(self, LinearSolver::Pcg(_))
+    }
+
     /// Solves with the factorization of the last matrix solved (modified Newton); `None`
     /// when the solver keeps none (PCG) or has none for this structure. See
     /// [`SparseCholesky::resolve`].
@@ -724,6 +747,28 @@ fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
     });
 }
 
+/// The filtered rows' preconditioning made symmetric: `zᵢ = Sᵢ Dᵢ⁻¹ Sᵢ rᵢ` with block-Jacobi's
+/// `Dᵢ⁻¹`, where the fused update wrote `Dᵢ⁻¹ rᵢ`; returns the change in `r · z`. A
+/// projector rounded to the precision is idempotent only to a few units in the last place,
+/// so `r` strays from its range by as much: preconditioned as `S D⁻¹` the iteration is not
+/// symmetric at that level, and a 32² cloth's solves on a rod stalled there and diverged
+/// (measured, in `f64` arithmetic on the `f32` projectors). As `S D⁻¹ S` they converge.
+fn symmetric_rows(
+    filters: &[(u32, Matrix3)],
+    inv: &[Matrix3],
+    r: &[Vector],
+    z: &mut [Vector],
+) -> Scalar {
+    let mut change = 0.0;
+    for &(i, s) in filters {
+        let i = i as usize;
+        let zi = s * (inv[i] * (s * r[i]));
+        change += r[i].dot(zi) - r[i].dot(z[i]);
+        z[i] = zi;
+    }
+    change
+}
+
 /// `Σ a_i · b_i` over rows `r`.
 fn dot(a: &[Vector], b: &[Vector], r: Range<usize>) -> Scalar {
     a[r.clone()].iter().zip(&b[r]).map(|(x, y)| x.dot(*y)).sum()
@@ -792,11 +837,44 @@ impl Pcg {
         x: &mut [Vector],
         mask: &[Scalar],
     ) -> PcgReport {
+        self.solve_filtered(a, b, x, mask, &[])
+    }
+
+    /// [`Pcg::solve`] with Baraff and Witkin's filter in its general form (*Large steps in
+    /// cloth simulation*, 1998, §5.3): each particle of `filters` is free only in the
+    /// subspace its projector `S` (symmetric, `S² = S`) keeps, along the normal of a contact
+    /// it rests on, say. Its residual, its search directions and its product `A p` are
+    /// filtered by `S`, so its component of `x` outside that subspace keeps its starting
+    /// value. The preconditioner is block-Jacobi whatever [`Pcg::preconditioner`] says
+    /// (the multigrid is built for whole particles), filtered on both sides, `S D⁻¹ S`, so
+    /// the iteration stays symmetric (Ascher and Boxerman, *On the modified conjugate
+    /// gradient method in cloth simulation*, 2003). The tolerance is relative to the larger
+    /// of `‖S b‖` and the first residual, which also measures what the prescribed parts
+    /// ask. Particles not listed are filtered by their `mask` alone; with no filters this is
+    /// [`Pcg::solve`], bit for bit.
+    ///
+    /// # Panics
+    /// If `b`, `x` or `mask` is shorter than the matrix, or a filter's particle is not in it.
+    pub fn solve_filtered(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) -> PcgReport {
         let n = a.len();
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.q] {
             v.resize(n, Vector::ZERO);
         }
-        self.active = self.preconditioner.for_size(n);
+        // The multigrid is built for whole particles, free or cut loose. Filtered in part, its
+        // iterations grew tenfold and a solve in f32 diverged (a 64² cloth on a rod), where
+        // block-Jacobi converged: filtered solves take block-Jacobi.
+        self.active = if filters.is_empty() {
+            self.preconditioner.for_size(n)
+        } else {
+            Preconditioner::BlockJacobi
+        };
         match self.active {
             Preconditioner::BlockJacobi => {
                 invert_blocks(&a.diag, &mut self.inv_diag);
@@ -815,7 +893,7 @@ impl Pcg {
             let usable = scratch.packed.update(a);
             Product::of(a, &scratch.packed, usable)
         };
-        let report = self.iterate(op, b, x, mask, &scratch.partials);
+        let report = self.iterate(op, b, x, mask, filters, &scratch.partials);
         self.scratch = Some(scratch);
         report
     }
@@ -826,20 +904,37 @@ impl Pcg {
         b: &[Vector],
         x: &mut [Vector],
         mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
         partials: &Partials,
     ) -> PcgReport {
         let n = op.matrix().len();
+        // The filters' rows after each masked pass (a few particles: on the caller).
+        let filter = |v: &mut [Vector]| {
+            for &(i, s) in filters {
+                v[i as usize] = s * v[i as usize];
+            }
+        };
         // r = S (b − A x), and ‖S b‖²
         op.mul_map(x, &mut self.r, |i, ax| (b[i] - ax) * mask[i], None);
-        let [bb] = sum_rows(partials, n, |rows| {
+        filter(&mut self.r);
+        let [mut bb] = sum_rows(partials, n, |rows| {
             [rows.map(|i| (b[i] * mask[i]).length_squared()).sum()]
         });
-        let bnorm = bb.sqrt();
+        for &(i, s) in filters {
+            let bi = b[i as usize] * mask[i as usize];
+            bb += (s * bi).length_squared() - bi.length_squared();
+        }
+        let bnorm = bb.max(0.0).sqrt();
         if bnorm == 0.0 {
             for (xi, m) in x.iter_mut().zip(mask) {
                 if *m != 0.0 {
                     *xi = Vector::ZERO;
                 }
+            }
+            // Filtered particles keep their constrained part.
+            for &(i, s) in filters {
+                let xi = &mut x[i as usize];
+                *xi -= s * *xi;
             }
             return PcgReport {
                 iterations: 0,
@@ -849,6 +944,7 @@ impl Pcg {
             };
         }
         self.precondition(op, mask);
+        symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
         let [mut rz, rr] = {
             let (p, r, z) = (SharedMut(self.p.as_mut_ptr()), &self.r, &self.z);
             sum_rows(partials, n, |rows| {
@@ -860,13 +956,25 @@ impl Pcg {
                 [dot(r, z, rows.clone()), dot(r, r, rows)]
             })
         };
+        filter(&mut self.p);
+        // With filters, the prescribed parts of `x` act as a right-hand side `−A x_c` that
+        // `S b` does not measure (a contact stopping a falling cloth: `S b` is nearly zero,
+        // the prescribed change is not): the tolerance is taken relative to the larger of
+        // `‖S b‖` and the first residual, which holds both.
+        let bnorm = if filters.is_empty() {
+            bnorm
+        } else {
+            bnorm.max(rr.sqrt())
+        };
         let mut it = 0;
         let mut rel = rr.sqrt() / bnorm;
         let mut failed = !rel.is_finite();
         let xp = SharedMut(x.as_mut_ptr());
         while rel > self.tolerance && it < self.max_iterations && !failed {
             // q = S A p, and p · q
+            // (`p = S p`, so `p · A p = p · S A p`.)
             let pq = op.mul_map(&self.p, &mut self.q, |i, ap| ap * mask[i], Some(partials));
+            filter(&mut self.q);
             if pq.is_nan() || pq <= 0.0 {
                 // Not positive definite along p, or a non-finite value: the answer is unusable.
                 failed = true;
@@ -878,7 +986,7 @@ impl Pcg {
                 SharedMut(self.z.as_mut_ptr()),
             );
             let (p, q, inv) = (&self.p, &self.q, &self.inv_diag);
-            let [rz_new, rr] = if self.active == Preconditioner::BlockJacobi {
+            let [mut rz_new, rr] = if self.active == Preconditioner::BlockJacobi {
                 // Fused: one pass over the vectors.
                 sum_rows(partials, n, |rows| {
                     // SAFETY: disjoint ranges of `x`, `r` and `z`, which have the matrix's
@@ -916,6 +1024,7 @@ impl Pcg {
                 let (r, z) = (&self.r, &self.z);
                 [sum_rows(partials, n, |rows| [dot(r, z, rows)])[0], rr]
             };
+            rz_new += symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
             let beta = rz_new / rz;
             rz = rz_new;
             let (pp, z) = (SharedMut(self.p.as_mut_ptr()), &self.z);
@@ -926,6 +1035,7 @@ impl Pcg {
                     *p = (z[i] + *p * beta) * mask[i];
                 }
             });
+            filter(&mut self.p);
             it += 1;
             rel = rr.sqrt() / bnorm;
             failed |= !rel.is_finite();
