@@ -681,27 +681,13 @@ impl Collider {
         }
         let pose = self.pose(t);
         let thick = self.material.thickness as Scalar + slack;
-        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
-        let clear = self.face_filter(&pose, &shape_pose, thick, edge);
         let n = x
             .len()
             .min(v.len())
             .min(f.len())
             .min(inv_mass.len())
             .min(mask.len());
-        for face in faces {
-            let ids = face.map(|i| i as usize);
-            if ids[0].max(ids[1]).max(ids[2]) >= n {
-                continue;
-            }
-            let tri = ids.map(|i| x[i]);
-            if clear(tri, 0.0) || self.feature_held(&pose, thick, tri, None) {
-                continue;
-            }
-            let Some((_, point, nrm, dist)) = self.face_contact(&pose, &shape_pose, thick, tri)
-            else {
-                continue;
-            };
+        for (ids, (_, point, nrm, dist)) in self.faces_within(&pose, thick, edge, faces, x, n) {
             let vc = Self::surface_velocity(&pose, point);
             // A triangle that may cross more than the thickness in the step is not held: the
             // contact after the step knows the side it came from (`resolve_faces`' swept
@@ -749,27 +735,14 @@ impl Collider {
         }
         let (start, end) = (self.pose(t), self.pose(t + h));
         let thick = self.material.thickness as Scalar;
-        let pose_of = |p: &Pose| Pose3::from_parts(p.origin.to_f32(), p.rotation);
-        let (shape_start, shape_end) = (pose_of(&start), pose_of(&end));
-        let clear = self.face_filter(&end, &shape_end, thick, edge);
+        let shape_start = Pose3::from_parts(start.origin.to_f32(), start.rotation);
         let n = x0
             .len()
             .min(trial.len())
             .min(inv_mass.len())
             .min(mask.len());
         let before = out.len();
-        for face in faces {
-            let ids = face.map(|i| i as usize);
-            if ids[0].max(ids[1]).max(ids[2]) >= n {
-                continue;
-            }
-            let tri = ids.map(|i| trial[i]);
-            if clear(tri, 0.0) || self.feature_held(&end, thick, tri, None) {
-                continue;
-            }
-            let Some((_, _, _, dist)) = self.face_contact(&end, &shape_end, thick, tri) else {
-                continue;
-            };
+        for (ids, (_, _, _, dist)) in self.faces_within(&end, thick, edge, faces, trial, n) {
             if thick - dist <= 0.01 * thick {
                 continue;
             }
@@ -794,6 +767,33 @@ impl Collider {
             }
         }
         out.len() - before
+    }
+
+    /// The triangles of `faces` (their corners below `n`, at positions `x`) nearer the
+    /// collider at `pose` than `thick`, with their corners and [`Collider::face_contact`]:
+    /// the cheap filter and the per-feature bound told first.
+    fn faces_within<'a>(
+        &'a self,
+        pose: &'a Pose,
+        thick: Scalar,
+        edge: Scalar,
+        faces: &'a [[u32; 3]],
+        x: &'a [Vector],
+        n: usize,
+    ) -> impl Iterator<Item = ([usize; 3], ([Scalar; 3], Vector, Vector, Scalar))> + 'a {
+        let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        let clear = self.face_filter(pose, &shape_pose, thick, edge);
+        faces.iter().filter_map(move |face| {
+            let ids = face.map(|i| i as usize);
+            if ids[0].max(ids[1]).max(ids[2]) >= n {
+                return None;
+            }
+            let tri = ids.map(|i| x[i]);
+            if clear(tri, 0.0) || self.feature_held(pose, thick, tri, None) {
+                return None;
+            }
+            Some((ids, self.face_contact(pose, &shape_pose, thick, tri)?))
+        })
     }
 
     /// Marks in `out` the particles within the collider's thickness plus `slack` of it at
