@@ -473,56 +473,60 @@ fn direction_filtered_pcg_equals_the_solve_on_the_free_directions() {
         }
     }
     let dense = a.to_dense();
-    let x0f: Vec<f64> = x0
-        .iter()
-        .flat_map(|v| (0..3).map(|k| v[k] as f64))
-        .collect();
-    let res: Vec<f64> = (0..3 * n)
-        .map(|r| b[r / 3][r % 3] as f64 - (0..3 * n).map(|c| dense[r][c] * x0f[c]).sum::<f64>())
-        .collect();
-    let au: Vec<Vec<f64>> = cols
-        .iter()
-        .map(|u| {
-            (0..3 * n)
-                .map(|r| (0..3 * n).map(|c| dense[r][c] * u[c]).sum())
-                .collect()
-        })
-        .collect();
-    let ar: Vec<Vec<f64>> = cols
-        .iter()
-        .map(|u| {
-            au.iter()
-                .map(|av| (0..3 * n).map(|r| u[r] * av[r]).sum())
-                .collect()
-        })
-        .collect();
-    let br: Vec<f64> = cols
-        .iter()
-        .map(|u| (0..3 * n).map(|r| u[r] * res[r]).sum())
-        .collect();
-    let y = dense_solve(ar, br);
-    let mut xr = x0f.clone();
-    for (u, yk) in cols.iter().zip(&y) {
-        for r in 0..3 * n {
-            xr[r] += u[r] * yk;
+    // The right-hand side above, and none at all: then only the prescribed parts' coupling
+    // `−A x₀` is left to solve for (a held particle whose force is nothing but the hold).
+    for (case, b) in [("b", b.clone()), ("b = 0", vec![Vector::ZERO; n])] {
+        let x0f: Vec<f64> = x0
+            .iter()
+            .flat_map(|v| (0..3).map(|k| v[k] as f64))
+            .collect();
+        let res: Vec<f64> = (0..3 * n)
+            .map(|r| b[r / 3][r % 3] as f64 - (0..3 * n).map(|c| dense[r][c] * x0f[c]).sum::<f64>())
+            .collect();
+        let au: Vec<Vec<f64>> = cols
+            .iter()
+            .map(|u| {
+                (0..3 * n)
+                    .map(|r| (0..3 * n).map(|c| dense[r][c] * u[c]).sum())
+                    .collect()
+            })
+            .collect();
+        let ar: Vec<Vec<f64>> = cols
+            .iter()
+            .map(|u| {
+                au.iter()
+                    .map(|av| (0..3 * n).map(|r| u[r] * av[r]).sum())
+                    .collect()
+            })
+            .collect();
+        let br: Vec<f64> = cols
+            .iter()
+            .map(|u| (0..3 * n).map(|r| u[r] * res[r]).sum())
+            .collect();
+        let y = dense_solve(ar, br);
+        let mut xr = x0f.clone();
+        for (u, yk) in cols.iter().zip(&y) {
+            for r in 0..3 * n {
+                xr[r] += u[r] * yk;
+            }
         }
-    }
-    let scale = xr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let tol = if F64 { 1e-10 } else { 1e-5 };
-    // Filtered solves take block-Jacobi whatever the preconditioner asked for.
-    let mut pcg = Pcg::new(tol as Scalar, 200).with_preconditioner(Preconditioner::Multigrid);
-    let mut x = x0.clone();
-    let rep = pcg.solve_filtered(&a, &b, &mut x, &mask, &holds.filters);
-    println!("{rep:?}");
-    assert!(rep.converged, "{rep:?}");
-    assert_eq!(pcg.active_preconditioner(), Preconditioner::BlockJacobi);
-    for r in 0..3 * n {
-        let got = x[r / 3][r % 3] as f64;
-        assert!(
-            (got - xr[r]).abs() <= 100.0 * tol * scale,
-            "dof {r}: {got} vs {}",
-            xr[r]
-        );
+        let scale = xr.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let tol = if F64 { 1e-10 } else { 1e-5 };
+        // Filtered solves take block-Jacobi whatever the preconditioner asked for.
+        let mut pcg = Pcg::new(tol as Scalar, 200).with_preconditioner(Preconditioner::Multigrid);
+        let mut x = x0.clone();
+        let rep = pcg.solve_filtered(&a, &b, &mut x, &mask, &holds.filters);
+        println!("{case}: {rep:?}");
+        assert!(rep.converged, "{case}: {rep:?}");
+        assert_eq!(pcg.active_preconditioner(), Preconditioner::BlockJacobi);
+        for r in 0..3 * n {
+            let got = x[r / 3][r % 3] as f64;
+            assert!(
+                (got - xr[r]).abs() <= 100.0 * tol * scale,
+                "{case}, dof {r}: {got} vs {}",
+                xr[r]
+            );
+        }
     }
 }
 

@@ -925,7 +925,11 @@ impl Pcg {
             bb += (s * bi).length_squared() - bi.length_squared();
         }
         let bnorm = bb.max(0.0).sqrt();
-        if bnorm == 0.0 {
+        // With filters, `S b = 0` still leaves the prescribed parts' residual to solve for.
+        let prescribed = bnorm == 0.0
+            && !filters.is_empty()
+            && sum_rows(partials, n, |rows| [dot(&self.r, &self.r, rows)])[0] > 0.0;
+        if bnorm == 0.0 && !prescribed {
             for (xi, m) in x.iter_mut().zip(mask) {
                 if *m != 0.0 {
                     *xi = Vector::ZERO;
