@@ -1735,11 +1735,6 @@ impl NormalHolds {
         self.filters.clear();
     }
 
-    /// True when nothing is held.
-    pub fn is_empty(&self) -> bool {
-        self.raw.is_empty()
-    }
-
     /// Turns [`NormalHolds::raw`] into [`NormalHolds::filters`] and writes each held
     /// particle's prescribed part into a solve's starting guess `x`, which the filtered
     /// solve keeps: each particle's normals made orthonormal (Gram–Schmidt, in a fixed

@@ -290,20 +290,20 @@ pub trait Linearization: Sync {
         let _ = (t, state, mask);
     }
     /// Holds the corners of triangles resting on colliders along the contact normals for
-    /// the step ([`Collider::hold_faces`](crate::core::collide::Collider::hold_faces)):
-    /// fills `holds`' raw list (cleared first); `f` is the total force at the step's start.
-    /// Returns true when something is held. None by default.
+    /// the step of length `h` from `t`
+    /// ([`Collider::hold_faces`](crate::core::collide::Collider::hold_faces)): fills `holds`'
+    /// raw list (cleared first); `f` is the total force at the step's start. None by default.
     fn hold_faces(
         &self,
-        (t, h): (Scalar, Scalar),
+        t: Scalar,
+        h: Scalar,
         state: &ParticleState,
         f: &[Vector],
         mask: &[Scalar],
         holds: &mut NormalHolds,
-    ) -> bool {
+    ) {
         let _ = (t, h, state, f, mask);
         holds.clear();
-        false
     }
     /// Adds to `holds` the corners of triangles that the trial end of the step in
     /// `holds.trial` takes into colliders
@@ -522,15 +522,16 @@ impl Linearization for ParticleModel {
 
     fn hold_faces(
         &self,
-        (t, h): (Scalar, Scalar),
+        t: Scalar,
+        h: Scalar,
         state: &ParticleState,
         f: &[Vector],
         mask: &[Scalar],
         holds: &mut NormalHolds,
-    ) -> bool {
+    ) {
         holds.clear();
         if !self.hold_faces || self.contact_faces.is_empty() || self.colliders.is_empty() {
-            return false;
+            return;
         }
         for c in &self.colliders {
             // A fiftieth of the thickness of slack: a triangle whose corners the last step
@@ -551,7 +552,6 @@ impl Linearization for ParticleModel {
                 &mut holds.raw,
             );
         }
-        !holds.is_empty()
     }
 
     fn hold_faces_trial(

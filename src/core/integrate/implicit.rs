@@ -154,7 +154,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
-        lin.hold_faces((t, h), ps, &self.f, &self.mask, &mut self.holds);
+        lin.hold_faces(t, h, ps, &self.f, &self.mask, &mut self.holds);
         lin.assemble_damping(ps, h, a);
         let m = lin.masses();
         for i in 0..n {
@@ -290,7 +290,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         // directions (PCG; the Cholesky leaves them to the contact after the step).
         let filtering = self.solver.filters();
         if filtering {
-            lin.hold_faces((t, h), ps, &self.f0, &self.mask, &mut self.holds);
+            lin.hold_faces(t, h, ps, &self.f0, &self.mask, &mut self.holds);
         } else {
             self.holds.clear();
         }
