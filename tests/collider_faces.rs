@@ -1,7 +1,7 @@
 //! Colliders against a surface's triangles, not its particles alone: a rod or a small sphere
 //! between a cloth's particles is met by the triangles around it. Checked by distances written
-//! apart from the collision code (`common::intersect`'s point–triangle distance, minimised
-//! along a segment), against the same scene with the particles alone (which lets the collider
+//! apart from the collision code (`common::intersect`'s point–triangle distance; a rod's
+//! axis against the triangles projected across it), against the same scene with the particles alone (which lets the collider
 //! through, so the tests can fail), and by the impulses' momentum and kinetic energy.
 
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
@@ -26,31 +26,45 @@ fn positions(s: &ParticleState) -> Vec<P> {
         .collect()
 }
 
-/// Distance from segment `a b` to a triangle: the distance from a point of the segment to the
-/// triangle is convex along it (the distance to a convex set, composed with an affine map),
-/// so a ternary search finds its least value; zero where the segment crosses the triangle.
-fn segment_triangle_distance(a: P, b: P, t: &[P; 3]) -> f64 {
-    let at = |s: f64| {
-        let p = [0, 1, 2].map(|k| a[k] + (b[k] - a[k]) * s);
-        point_triangle_distance(p, t)
-    };
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    for _ in 0..100 {
-        let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
-        if at(m1) <= at(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
-    }
-    at(0.5 * (lo + hi)).min(at(0.0)).min(at(1.0))
-}
-
 /// The nearest any of `tris` (at positions `x`) comes to the surface of a rod of radius `r`
-/// along `a b`.
+/// along `a b`, a segment along z that outreaches them: the distance from a point to the
+/// rod's axis then depends on its x and y alone, so a triangle's is the 2D distance from the
+/// axis' point to the triangle projected onto the xy-plane (zero when the projection holds
+/// the point: the axis crosses the triangle).
 fn rod_distance(x: &[P], tris: &[[u32; 3]], a: P, b: P, r: f64) -> f64 {
+    assert!(a[0] == b[0] && a[1] == b[1], "the rod lies along z");
+    let (lo, hi) = (a[2].min(b[2]), a[2].max(b[2]));
+    assert!(
+        tris.iter()
+            .flatten()
+            .all(|&i| (lo..=hi).contains(&x[i as usize][2])),
+        "the rod outreaches the cloth"
+    );
+    let o = [a[0], a[1]];
+    let seg = |a: [f64; 2], b: [f64; 2]| {
+        let (ab, ao) = ([b[0] - a[0], b[1] - a[1]], [o[0] - a[0], o[1] - a[1]]);
+        let l = ab[0] * ab[0] + ab[1] * ab[1];
+        let t = if l > 0.0 {
+            ((ao[0] * ab[0] + ao[1] * ab[1]) / l).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (a[0] + ab[0] * t - o[0]).hypot(a[1] + ab[1] * t - o[1])
+    };
+    let side =
+        |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (o[1] - a[1]) - (b[1] - a[1]) * (o[0] - a[0]);
     tris.iter()
-        .map(|t| segment_triangle_distance(a, b, &t.map(|i| x[i as usize])) - r)
+        .map(|t| {
+            let [a, b, c] = t.map(|i| [x[i as usize][0], x[i as usize][1]]);
+            let s = [side(a, b), side(b, c), side(c, a)];
+            let inside = s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0);
+            let d = if inside {
+                0.0
+            } else {
+                seg(a, b).min(seg(b, c)).min(seg(c, a))
+            };
+            d - r
+        })
         .fold(f64::INFINITY, f64::min)
 }
 
@@ -352,40 +366,6 @@ fn frame_long_steps_keep_a_cloth_on_a_rod_thinner_than_its_cells() {
     }
 }
 
-/// The nearest a cloth's triangles come to the axis of a rod along z through `(0, y)`, less
-/// its radius `r`: the distance from a line along z depends on x and y alone, so it is the
-/// 2D distance from the axis' point to each triangle projected onto the xy-plane (zero when
-/// the projection holds the point: the axis crosses the triangle). The rod must outreach
-/// the cloth in z.
-fn z_rod_distance(x: &[P], tris: &[[u32; 3]], y: f64, r: f64) -> f64 {
-    let o = [0.0, y];
-    let seg = |a: [f64; 2], b: [f64; 2]| {
-        let (ab, ao) = ([b[0] - a[0], b[1] - a[1]], [o[0] - a[0], o[1] - a[1]]);
-        let l = ab[0] * ab[0] + ab[1] * ab[1];
-        let t = if l > 0.0 {
-            ((ao[0] * ab[0] + ao[1] * ab[1]) / l).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        (a[0] + ab[0] * t - o[0]).hypot(a[1] + ab[1] * t - o[1])
-    };
-    let side =
-        |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (o[1] - a[1]) - (b[1] - a[1]) * (o[0] - a[0]);
-    tris.iter()
-        .map(|t| {
-            let [a, b, c] = t.map(|i| [x[i as usize][0], x[i as usize][1]]);
-            let s = [side(a, b), side(b, c), side(c, a)];
-            let inside = s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0);
-            let d = if inside {
-                0.0
-            } else {
-                seg(a, b).min(seg(b, c)).min(seg(c, a))
-            };
-            d - r
-        })
-        .fold(f64::INFINITY, f64::min)
-}
-
 /// Implicit steps as long as a frame or half of one, on a rod as wide as the cloth's cells:
 /// the pile's cloth, 32² particles over 0.6 m (cells of 1.94 cm), dropped from 0.75 m onto a
 /// rod of 1 cm radius at 0.3 m. Each step's springs pull the triangles over the rod round it;
@@ -447,7 +427,13 @@ fn implicit_steps_hang_a_cloth_on_a_rod_as_wide_as_its_cells_without_wedging() {
         let mut nearest = f64::INFINITY;
         for _ in 0..180 {
             sim.advance_frame().unwrap();
-            nearest = nearest.min(z_rod_distance(&positions(&sim.state), &tris, y, r));
+            nearest = nearest.min(rod_distance(
+                &positions(&sim.state),
+                &tris,
+                [0.0, y, -0.8],
+                [0.0, y, 0.8],
+                r,
+            ));
         }
         let end = positions(&sim.state);
         let n = 32;
