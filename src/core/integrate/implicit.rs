@@ -395,7 +395,11 @@ pub struct NewtonReport {
 /// *Incremental Potential Contact*, Algorithm 1; a step that small is taken whole, without a
 /// line search). The Hessian `M + h D + h² K` is projected to positive definite per spring by
 /// default, so every Newton direction descends. Fully implicit: it dissipates energy and is
-/// stable at any `h`.
+/// stable at any `h`. With a solver that filters directions (PCG) and
+/// [`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces), the
+/// corners of a surface's triangles resting on colliders, or that an iterate takes into them,
+/// are held along the contact normals ([`NormalHolds`]): Φ is minimized over the velocities
+/// that keep the holds, its gradient and the Newton directions projected onto the free ones.
 #[derive(Clone, Debug)]
 pub struct BackwardEuler {
     /// Iteration cap per step (with [`BackwardEuler::reuse_factorization`], the cap on
@@ -436,6 +440,7 @@ pub struct BackwardEuler {
     d: Vec<Vector>,
     vt: Vec<Vector>,
     mask: Vec<Scalar>,
+    holds: NormalHolds,
     report: NewtonReport,
     stats: IntegratorStats,
 }
@@ -460,6 +465,7 @@ impl Default for BackwardEuler {
             d: vec![],
             vt: vec![],
             mask: vec![],
+            holds: NormalHolds::default(),
             report: NewtonReport::default(),
             stats: IntegratorStats::default(),
         }
@@ -480,6 +486,47 @@ impl BackwardEuler {
     pub fn last_newton(&self) -> &NewtonReport {
         &self.report
     }
+}
+
+/// Projects each held particle's entry of `g` onto the directions it stays free in
+/// ([`NormalHolds::filters`]).
+fn filter(filters: &[(u32, Matrix3)], g: &mut [Vector]) {
+    for &(i, s) in filters {
+        g[i as usize] = s * g[i as usize];
+    }
+}
+
+/// Puts backward Euler's velocities `v` on the holds in `holds.raw`
+/// ([`NormalHolds::settle`]) and returns `Φ` there, its gradient in `g` filtered. Velocities
+/// at which `Φ` is not finite (an element inverted by a held corner's velocity) are not
+/// taken: the holds are dropped for the step, `v` and `g` restored, and `phi`, their `Φ`,
+/// returned.
+#[allow(clippy::too_many_arguments)]
+fn settle_on_holds(
+    lin: &dyn Linearization,
+    (t_end, h): (Scalar, Scalar),
+    (x0, v0): (&[Vector], &[Vector]),
+    holds: &mut NormalHolds,
+    v: &mut [Vector],
+    x: &mut [Vector],
+    g: &mut [Vector],
+    phi: f64,
+    stats: &mut IntegratorStats,
+) -> f64 {
+    holds.kept.clear();
+    holds.kept.extend_from_slice(v);
+    holds.settle(None, v);
+    stats.evaluations += 1;
+    let held = lin.incremental_potential(t_end, h, x0, v0, v, x, Some(g));
+    if held.is_finite() {
+        filter(&holds.filters, g);
+        return held;
+    }
+    holds.clear();
+    v.copy_from_slice(&holds.kept);
+    stats.evaluations += 1;
+    lin.incremental_potential(t_end, h, x0, v0, v, x, Some(g));
+    phi
 }
 
 fn masked_norm(g: &[Vector], mask: &[Scalar]) -> Scalar {
@@ -560,6 +607,33 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             );
             self.stats.evaluations += 1;
         }
+        // Triangles resting on colliders, where the solver can filter directions (PCG): their
+        // corners held along the contact normals (see `NormalHolds`), the Newton iteration
+        // minimizing Φ over the velocities that keep the holds, its gradient and directions
+        // projected onto the free ones. What presses a triangle onto a collider is `−∇Φ` at
+        // the first guess: at `v = v₀` that is `h f(x₀ + h v₀)`.
+        let filtering = self.solver.filters();
+        self.holds.clear();
+        if filtering {
+            for i in 0..n {
+                self.vt[i] = -self.g[i];
+            }
+            lin.hold_faces(t, h, ps, &self.vt, &self.mask, &mut self.holds);
+            if !self.holds.raw.is_empty() {
+                phi = settle_on_holds(
+                    lin,
+                    (t_end, h),
+                    (&self.x0, &self.v0),
+                    &mut self.holds,
+                    &mut self.v,
+                    &mut self.x,
+                    &mut self.g,
+                    phi,
+                    &mut self.stats,
+                );
+            }
+        }
+        let mut rounds = 0;
         let mut full_step = false;
         let mut last_reused = false;
         let mut small_step = false;
@@ -659,9 +733,38 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                     self.vt[i] = -self.g[i] * self.mask[i];
                     self.d[i] = Vector::ZERO;
                 }
-                solve = self.solver.solve(a, &self.vt, &mut self.d, &self.mask);
+                solve = if self.holds.filters.is_empty() {
+                    self.solver.solve(a, &self.vt, &mut self.d, &self.mask)
+                } else {
+                    self.solver
+                        .solve_filtered(a, &self.vt, &mut self.d, &self.mask, &self.holds.filters)
+                        .unwrap_or_else(|| self.solver.solve(a, &self.vt, &mut self.d, &self.mask))
+                };
                 self.stats.linear_solves += 1;
                 self.stats.linear_iterations += solve.iterations as u64;
+                if solve.failed && !self.holds.filters.is_empty() {
+                    // Round-off can end a filtered solve with a non-positive curvature (see
+                    // `solve_holding`): the holds are dropped for the rest of the step, the
+                    // contact after it stopping what goes in, as before them.
+                    self.holds.clear();
+                    phi = lin.incremental_potential(
+                        t_end,
+                        h,
+                        &self.x0,
+                        &self.v0,
+                        &self.v,
+                        &mut self.x,
+                        Some(&mut self.g),
+                    );
+                    self.stats.evaluations += 1;
+                    for i in 0..n {
+                        self.vt[i] = -self.g[i] * self.mask[i];
+                        self.d[i] = Vector::ZERO;
+                    }
+                    solve = self.solver.solve(a, &self.vt, &mut self.d, &self.mask);
+                    self.stats.linear_solves += 1;
+                    self.stats.linear_iterations += solve.iterations as u64;
+                }
                 slope = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
                 if !solve.failed && slope < 0.0 {
                     break;
@@ -703,6 +806,8 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                         Vector::ZERO
                     };
                 }
+                // Along the held particles' free directions only: `−S D⁻¹ S ∇Φ` descends.
+                filter(&self.holds.filters, &mut self.d);
                 slope = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
                 if slope.is_nan() || slope >= 0.0 {
                     break;
@@ -759,6 +864,34 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             );
             debug_assert!(phi <= trial || (phi - trial).abs() <= 1e-3 * trial.abs().max(1.0));
             self.stats.evaluations += 1;
+            filter(&self.holds.filters, &mut self.g);
+            // The active set (as `solve_holding` runs it for the linear solves, but within the
+            // Newton iteration): triangles that this iterate's end of the step takes into
+            // colliders are held as well, at most `HOLD_ROUNDS` times a step, and the
+            // iteration goes on from the velocities that keep the holds.
+            if filtering && rounds < HOLD_ROUNDS {
+                self.holds.trial.clear();
+                let (x0, v) = (&self.x0, &self.v);
+                self.holds.trial.extend((0..n).map(|i| x0[i] + v[i] * h));
+                if lin.hold_faces_trial(t, h, ps, &self.mask, &mut self.holds) {
+                    rounds += 1;
+                    phi = settle_on_holds(
+                        lin,
+                        (t_end, h),
+                        (&self.x0, &self.v0),
+                        &mut self.holds,
+                        &mut self.v,
+                        &mut self.x,
+                        &mut self.g,
+                        phi,
+                        &mut self.stats,
+                    );
+                    // The velocities moved: neither the last step's size nor its gradient
+                    // ratio says anything about convergence now.
+                    small_step = false;
+                    full_step = false;
+                }
+            }
         }
         if !self.v.iter().all(|v| v.is_finite()) {
             return Err(StepError::SolverFailed(kind));
