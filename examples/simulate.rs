@@ -19,7 +19,9 @@
 //! error control alone chooses), `--cfl NUMBER`,
 //! `--cfl-limit oscillation|physbam|physbam_later` (which per-spring bounds; with `--cfl`),
 //! `--duration SECONDS`, `--fps FRAMES_PER_SECOND`, `--size N` (cloth N×N), `--rtol`, `--atol`,
-//! `--no-guard`, `--obj`, `--out DIR`, `--quiet`, `--threads N` (threads for the force
+//! `--no-guard`, `--no-hold-faces` (implicit methods leave a surface's triangles on thin
+//! colliders to the contact after the step instead of holding them inside the solve),
+//! `--obj`, `--out DIR`, `--quiet`, `--threads N` (threads for the force
 //! kernels of one body; default 0: all cores; results are the same bits for any N),
 //! `--solver auto|pcg|cholesky` (the implicit methods' linear solver), `--tolerance E` (for
 //! `auto`: the relative energy error per simulated second it must meet; default none: the
@@ -51,6 +53,7 @@ struct Args {
     rtol: f64,
     atol: f64,
     guard: bool,
+    hold_faces: bool,
     obj: bool,
     out: Option<PathBuf>,
     quiet: bool,
@@ -73,6 +76,7 @@ fn parse_args() -> Result<Args, String> {
         rtol: 1e-4,
         atol: 1e-6,
         guard: true,
+        hold_faces: true,
         obj: false,
         out: None,
         quiet: false,
@@ -118,6 +122,7 @@ fn parse_args() -> Result<Args, String> {
             "--tolerance" => a.tolerance = Some(num(val("--tolerance")?, "--tolerance")?),
             "--atol" => a.atol = num(val("--atol")?, "--atol")?,
             "--no-guard" => a.guard = false,
+            "--no-hold-faces" => a.hold_faces = false,
             "--obj" => a.obj = true,
             "--out" => a.out = Some(val("--out")?.into()),
             "--quiet" => a.quiet = true,
@@ -347,7 +352,8 @@ fn run(a: &Args) -> Result<(), String> {
         }
         Some(mut scene) => {
             fs::write(out.join("scene.json"), scene.to_json()).map_err(|e| e.to_string())?;
-            let (model, state) = scene.build().map_err(|e| e.to_string())?;
+            let (mut model, state) = scene.build().map_err(|e| e.to_string())?;
+            model.hold_faces = a.hold_faces;
             let mut sim = Simulation::new(model, state, config(a));
             let rows = |sim: &Simulation<ParticleState, ParticleModel>,
                         fc: &mut BufWriter<fs::File>,

@@ -190,7 +190,7 @@ fn build_body(
             torn_from
         };
     }
-    let (model, state) = layout.build().map_err(|errs| {
+    let (mut model, state) = layout.build().map_err(|errs| {
         // The first problem, named by the entity behind the packed index.
         let e = &errs[0];
         let what = match e.item {
@@ -223,6 +223,7 @@ fn build_body(
             format!("{what}: {field} {}{more}", e.message)
         }
     })?;
+    model.hold_faces = body.hold_faces;
     let config = DriverConfig {
         integrator: body.integrator,
         policy: body.step,
