@@ -845,10 +845,10 @@ impl Pcg {
     /// subspace its projector `S` (symmetric, `S² = S`) keeps, along the normal of a contact
     /// it rests on, say. Its residual, its search directions and its product `A p` are
     /// filtered by `S`, so its component of `x` outside that subspace keeps its starting
-    /// value. The preconditioner is block-Jacobi whatever [`Pcg::preconditioner`] says
-    /// (the multigrid is built for whole particles), filtered on both sides, `S D⁻¹ S`, so
+    /// value. The preconditioner is filtered too: block-Jacobi on both sides, `S D⁻¹ S`, so
     /// the iteration stays symmetric (Ascher and Boxerman, *On the modified conjugate
-    /// gradient method in cloth simulation*, 2003). The tolerance is relative to the larger
+    /// gradient method in cloth simulation*, 2003); the multigrid built on the filtered
+    /// system ([`Multigrid::setup_filtered`]). The tolerance is relative to the larger
     /// of `‖S b‖` and the first residual, which also measures what the prescribed parts
     /// ask. Particles not listed are filtered by their `mask` alone; with no filters this is
     /// [`Pcg::solve`], bit for bit.
@@ -867,19 +867,15 @@ impl Pcg {
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.q] {
             v.resize(n, Vector::ZERO);
         }
-        // The multigrid is built for whole particles, free or cut loose. Filtered in part, its
-        // iterations grew tenfold and a solve in f32 diverged (a 64² cloth on a rod), where
-        // block-Jacobi converged: filtered solves take block-Jacobi.
-        self.active = if filters.is_empty() {
-            self.preconditioner.for_size(n)
-        } else {
-            Preconditioner::BlockJacobi
-        };
+        // The multigrid is built on the filtered system (`Multigrid::setup_filtered`); built
+        // for whole particles, free or cut loose, and filtered after, its iterations grew
+        // tenfold and a solve in f32 diverged (a 64² cloth on a rod).
+        self.active = self.preconditioner.for_size(n);
         match self.active {
             Preconditioner::BlockJacobi => {
                 invert_blocks(&a.diag, &mut self.inv_diag);
             }
-            _ => self.multigrid.setup(a, mask),
+            _ => self.multigrid.setup_filtered(a, mask, filters),
         }
         assert!(
             b.len() >= n && x.len() >= n && mask.len() >= n,
@@ -948,7 +944,11 @@ impl Pcg {
             };
         }
         self.precondition(op, mask);
-        symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+        // Block-Jacobi's filtered rows made symmetric; the multigrid filters its own.
+        let jacobi = self.active == Preconditioner::BlockJacobi;
+        if jacobi {
+            symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+        }
         let [mut rz, rr] = {
             let (p, r, z) = (SharedMut(self.p.as_mut_ptr()), &self.r, &self.z);
             sum_rows(partials, n, |rows| {
@@ -1028,7 +1028,9 @@ impl Pcg {
                 let (r, z) = (&self.r, &self.z);
                 [sum_rows(partials, n, |rows| [dot(r, z, rows)])[0], rr]
             };
-            rz_new += symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+            if jacobi {
+                rz_new += symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+            }
             let beta = rz_new / rz;
             rz = rz_new;
             let (pp, z) = (SharedMut(self.p.as_mut_ptr()), &self.z);

@@ -30,6 +30,17 @@
 //! Pinned and prescribed particles (mask zero) are cut loose: their rows and columns are
 //! dropped and their diagonal blocks replaced by the identity, so the cycle returns zero for
 //! them and the free part is preconditioned as the filtered conjugate gradients iterate on it.
+//!
+//! Particles held along one or two directions (Baraff and Witkin's filter with projectors
+//! `Sᵢ = I − Σ eeᵀ`, [`Multigrid::setup_filtered`]) are cut loose along those directions only:
+//! the cycle is built for the filtered matrix `Â = S A S + (I − S)` with the prolongation
+//! `S P` (an aggregate's translation, each held member keeping its free part), so the coarse
+//! matrices are `Pᵀ S A S P` — blocks `Sᵢ A_ij S_j` summed by aggregate — and the finest
+//! level's diagonal blocks `Sᵢ Dᵢ Sᵢ + (I − Sᵢ)`. The held rows of the smoother's answer and
+//! of its residual are filtered again where they are formed, so the cycle maps the free
+//! directions to themselves, as conjugate gradients on the filtered system needs. Built on
+//! the unfiltered matrix instead, the coarse levels would move held particles along their
+//! normals, which the filtered system forbids.
 
 use super::{AT_JI, Product, SpringMatrix, for_each_rows};
 use crate::core::kernels::{self, SharedMut};
@@ -215,7 +226,14 @@ pub struct Multigrid {
     rhs: Vec<f64>,
     /// Structures analysed so far.
     pub analyses: u64,
+    /// The last setup's filters (particle, projector), and each particle's index into them
+    /// (or [`NO_FILTER`]; empty when there were none).
+    held: Vec<(u32, Matrix3)>,
+    filter_of: Vec<u32>,
 }
+
+/// A particle without a filter in [`Multigrid::filter_of`].
+const NO_FILTER: u32 = u32::MAX;
 
 impl Multigrid {
     /// Number of levels (the finest included) of the last structure.
@@ -411,10 +429,45 @@ impl Multigrid {
     /// a fifth of the margin (`ω A ≤ 1.6 D`). Matrices with blocks that are not symmetric
     /// (tets' edges) are taken to hold tets.
     pub fn setup(&mut self, a: &SpringMatrix, mask: &[Scalar]) {
+        self.setup_filtered(a, mask, &[]);
+    }
+
+    /// [`setup`](Self::setup) for the system filtered by `filters` (each a particle and its
+    /// projector `S` onto the directions it stays free in; see the module docs): the cycle
+    /// then maps vectors of the free directions to vectors of the free directions.
+    pub fn setup_filtered(
+        &mut self,
+        a: &SpringMatrix,
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) {
         let n = a.len();
         if self.levels.first().map(Level::len) != Some(n) || self.structure != a.structure {
             self.analyse(a);
         }
+        self.filter_of.clear();
+        self.held.clear();
+        if !filters.is_empty() {
+            self.filter_of.resize(n, NO_FILTER);
+            for &(i, s) in filters {
+                if let Some(f) = self.filter_of.get_mut(i as usize) {
+                    *f = self.held.len() as u32;
+                    self.held.push((i, s));
+                }
+            }
+        }
+        let (filter_of, held) = (&self.filter_of, &self.held);
+        let proj = |i: usize| {
+            filter_of
+                .get(i)
+                .filter(|&&k| k != NO_FILTER)
+                .map(|&k| held[k as usize].1)
+        };
+        // A block of rows `i` and column `j` of the filtered matrix: `Sᵢ A_ij S_j`.
+        let filtered = |i: usize, j: usize, b: Matrix3| match (proj(i), proj(j)) {
+            (None, None) => b,
+            (si, sj) => si.map_or(b, |s| s * b) * sj.unwrap_or(Matrix3::IDENTITY),
+        };
         let sym = a.symmetric_prefix();
         let e = if sym < a.off.len() { 4.0 } else { 2.0 };
         self.omega = OMEGA_TIMES_E / e;
@@ -422,6 +475,13 @@ impl Multigrid {
         let fine = &mut fine[0];
         for (i, (d, m)) in a.diag.iter().zip(mask).enumerate() {
             fine.diag[i] = if *m == 0.0 { Matrix3::IDENTITY } else { *d };
+        }
+        // Held particles: `S D S + (I − S)`, cut loose along their held directions.
+        for &(i, s) in held {
+            if mask[i as usize] != 0.0 {
+                let d = &mut fine.diag[i as usize];
+                *d = s * *d * s + (Matrix3::IDENTITY - s);
+            }
         }
         fine.invert();
         // `A S P`, in chunks of rows on the team: a source counts when its column is free.
@@ -435,9 +495,13 @@ impl Multigrid {
                 for (b, e) in ap.iter_mut().zip(entries) {
                     let sources = &srcs[src_start[e] as usize..src_start[e + 1] as usize];
                     // The pair's block counts when its column is free.
-                    *b = sum_sources(a, mask, sources, |i, j, side| {
-                        mask[if side == 0 { j } else { i }] != 0.0
-                    });
+                    *b = sum_sources(
+                        a,
+                        mask,
+                        sources,
+                        |i, j, side| mask[if side == 0 { j } else { i }] != 0.0,
+                        filtered,
+                    );
                 }
             });
         }
@@ -449,7 +513,13 @@ impl Multigrid {
             let sum = |e: usize| {
                 let sources = &list[start[e] as usize..start[e + 1] as usize];
                 // The pair's block counts when both its particles are free (`Pᵀ S A S P`).
-                sum_sources(a, mask, sources, |i, j, _| mask[i] != 0.0 && mask[j] != 0.0)
+                sum_sources(
+                    a,
+                    mask,
+                    sources,
+                    |i, j, _| mask[i] != 0.0 && mask[j] != 0.0,
+                    filtered,
+                )
             };
             let count = coarse.len();
             let (cd, co, cs) = (
@@ -493,7 +563,11 @@ impl Multigrid {
             }
             fill_empty(&mut coarse.diag);
         }
-        self.factor_coarsest();
+        // A system too small to coarsen is its finest level alone, smoothed only (`apply`):
+        // that level keeps no rows to factor.
+        if self.levels.len() > 1 {
+            self.factor_coarsest();
+        }
     }
 
     fn factor_coarsest(&mut self) {
@@ -612,11 +686,13 @@ impl Multigrid {
                     *z = inv[i] * r[i] * w;
                 }
             });
+            filter_rows(&self.held, &mut fine.z);
             if nl == 1 {
                 z[..n].copy_from_slice(&fine.z);
                 return;
             }
             a.mul_map(&fine.z, &mut fine.t, |i, az| (r[i] - az) * mask[i], None);
+            filter_rows(&self.held, &mut fine.t);
         }
         for l in 0..nl - 1 {
             let (done, rest) = self.levels.split_at_mut(l + 1);
@@ -683,19 +759,30 @@ impl Multigrid {
                         *z = z1 + inv[i] * (t[i] - ape) * (w * mask[i]);
                     }
                 });
+                // Held rows: the prolongation `S P` and the smoother keep them free.
+                filter_rows(&self.held, &mut z[..n]);
             }
         }
     }
 }
 
+/// `vᵢ ← Sᵢ vᵢ` for each held particle `(i, Sᵢ)`.
+fn filter_rows(held: &[(u32, Matrix3)], v: &mut [Vector]) {
+    for &(i, s) in held {
+        v[i as usize] = s * v[i as usize];
+    }
+}
+
 /// The sum of `a`'s blocks named by `sources` (encoded as in [`Multigrid::gather`]): a row's
 /// diagonal block when its particle is free, pair `k = (i, j)`'s block on side `s` (transposed
-/// on side 1 unless symmetric) when `counts(i, j, s)`; in the sources' order.
+/// on side 1 unless symmetric) when `counts(i, j, s)`; in the sources' order. Each block of
+/// row `r` and column `c` is taken as `map(r, c, block)` (the filter's `S_r A_rc S_c`).
 fn sum_sources(
     a: &SpringMatrix,
     mask: &[Scalar],
     sources: &[u32],
     counts: impl Fn(usize, usize, usize) -> bool,
+    map: impl Fn(usize, usize, Matrix3) -> Matrix3,
 ) -> Matrix3 {
     let (n, sym) = (a.len(), a.symmetric_prefix());
     let mut sum = Matrix3::ZERO;
@@ -703,7 +790,7 @@ fn sum_sources(
         let src = src as usize;
         if src < n {
             if mask[src] != 0.0 {
-                sum += a.diag[src];
+                sum += map(src, src, a.diag[src]);
             }
             continue;
         }
@@ -712,11 +799,14 @@ fn sum_sources(
         if !counts(i as usize, j as usize, side) {
             continue;
         }
+        let (i, j) = (i as usize, j as usize);
         let o = a.off[k];
-        sum += if side == 0 || k < sym {
-            o
+        sum += if side == 0 {
+            map(i, j, o)
+        } else if k < sym {
+            map(j, i, o)
         } else {
-            o.transpose()
+            map(j, i, o.transpose())
         };
     }
     sum
