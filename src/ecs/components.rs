@@ -139,9 +139,9 @@ pub struct SoftBody {
     /// colliders that need its triangles (rods, small balls, box edges) along the contact
     /// normals inside the solve, so a cloth on a rod about as wide as its cells hangs on it
     /// instead of wedging ([`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces)).
-    /// Default: on. Off, a step in contact costs about half as much, the triangles being left
-    /// to the contact after the step alone. Explicit methods and the Cholesky solver never
-    /// hold them.
+    /// Default: on. Off, the triangles are left to the contact after the step alone, which
+    /// costs less (the 64² cloth on a rod 1.0–1.6 times less) but may wedge the cloth.
+    /// Explicit methods and the Cholesky solver never hold them.
     pub hold_faces: bool,
 }
 
