@@ -382,43 +382,17 @@ fn frame_long_steps_keep_a_cloth_on_a_rod_thinner_than_its_cells() {
 /// 0.32 N, a strain of 3 %, to which bending over the rod adds a little (below 15 % in all).
 #[test]
 fn implicit_steps_hang_a_cloth_on_a_rod_as_wide_as_its_cells_without_wedging() {
-    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
     let (r, y) = (0.01, 0.3);
     for (integrator, h) in [
         (IntegratorKind::LinearlyImplicitEuler, 1.0 / 60.0),
         (IntegratorKind::LinearlyImplicitEuler, 1.0 / 120.0),
         (IntegratorKind::BackwardEuler, 1.0 / 60.0),
     ] {
-        let p = ClothPileParams {
-            cloths: 1,
-            size: 0.6,
-            self_collision: None,
-            ..Default::default()
-        }
-        .with_resolution(32);
-        let mut scene = cloth_pile(&p).unwrap();
-        let material = scene.colliders[1].material;
-        scene.colliders[1] = ColliderDesc {
-            shape: ShapeDesc::Capsule {
-                half_height: 0.8,
-                radius: r,
-            },
-            motion: Motion::Fixed {
-                position: [0.0, y, 0.0],
-            },
-            // The capsule's axis (y) turned onto z.
-            rotation: [
-                std::f64::consts::FRAC_1_SQRT_2,
-                0.0,
-                0.0,
-                std::f64::consts::FRAC_1_SQRT_2,
-            ],
-            material,
-        };
-        let thick = material.thickness;
+        let scene = common::cloth_on_a_rod(r, y);
+        let thick = scene.colliders[1].material.thickness;
         let tris = scene.surface.as_ref().unwrap().triangles.clone();
         let masses: Vec<f64> = scene.particles.iter().map(|q| q.mass).collect();
-        let edge = p.size / 31.0;
+        let edge = 0.6 / 31.0;
         let (mut model, state) = scene.build().unwrap();
         model.hold_faces = true;
         let mut sim = Simulation::new(

@@ -1066,6 +1066,47 @@ fn dot64(u: &[Vector], v: &[Vector]) -> f64 {
     u.iter().zip(v).map(|(a, b)| a.dot(*b) as f64).sum()
 }
 
+/// The multigrid's cycle `B` on ten pairs of random vectors `u, v` of the free degrees of
+/// freedom (those of `mask`, then `filter`ed): symmetric, `uᵀBv = vᵀBu` to the round-off of a
+/// product over the matrix (relative: f32 sums of thousands of terms), and positive,
+/// `uᵀBu > 0`; `check` looks at each `Bu`.
+fn check_cycle(
+    name: &str,
+    mg: &mut Multigrid,
+    a: &SpringMatrix,
+    mask: &[Scalar],
+    r: &mut u64,
+    filter: impl Fn(&mut [Vector]),
+    mut check: impl FnMut(&[Vector]),
+) {
+    let n = a.len();
+    let random = |r: &mut u64| -> Vec<Vector> {
+        let mut v: Vec<Vector> = (0..n)
+            .map(|i| {
+                Vector::new(lcg(r) as Scalar, lcg(r) as Scalar, lcg(r) as Scalar) * (2.0 * mask[i])
+                    - Vector::ONE * mask[i]
+            })
+            .collect();
+        filter(&mut v);
+        v
+    };
+    let (mut bu, mut bv) = (vec![Vector::ZERO; n], vec![Vector::ZERO; n]);
+    let eps = if F64 { 1e-10 } else { 1e-4 };
+    for _ in 0..10 {
+        let (u, v) = (random(r), random(r));
+        mg.apply(a, mask, &u, &mut bu);
+        mg.apply(a, mask, &v, &mut bv);
+        let (ubv, vbu) = (dot64(&u, &bv), dot64(&v, &bu));
+        let scale = dot64(&u, &bu).abs().sqrt() * dot64(&v, &bv).abs().sqrt();
+        assert!(
+            (ubv - vbu).abs() <= eps * scale,
+            "{name}: uᵀBv = {ubv}, vᵀBu = {vbu}"
+        );
+        assert!(dot64(&u, &bu) > 0.0, "{name}: uᵀBu ≤ 0");
+        check(&bu);
+    }
+}
+
 /// The multigrid V-cycle is what conjugate gradients needs of a preconditioner: symmetric
 /// (`uᵀ B v = vᵀ B u`) and positive definite on the free degrees of freedom, zero on the
 /// cut-loose ones; and conjugate gradients with it converge to the solution block-Jacobi's
@@ -1095,35 +1136,21 @@ fn multigrid_preconditioner_is_symmetric_positive_definite_and_solves() {
         mg.setup(&a, &mask);
         println!("{name}: {n} particles, levels {:?}", mg.sizes());
         assert!(mg.levels() >= 3, "{name}: a hierarchy, not one level");
-        let random = |r: &mut u64| -> Vec<Vector> {
-            (0..n)
-                .map(|i| {
-                    Vector::new(lcg(r) as Scalar, lcg(r) as Scalar, lcg(r) as Scalar)
-                        * (2.0 * mask[i])
-                        - Vector::ONE * mask[i]
-                })
-                .collect()
-        };
-        let (mut bu, mut bv) = (vec![Vector::ZERO; n], vec![Vector::ZERO; n]);
-        // Round-off of a product over the matrix, relative: f32 sums of thousands of terms.
-        let eps = if F64 { 1e-10 } else { 1e-4 };
-        for _ in 0..10 {
-            let (u, v) = (random(&mut r), random(&mut r));
-            mg.apply(&a, &mask, &u, &mut bu);
-            mg.apply(&a, &mask, &v, &mut bv);
-            let (ubv, vbu) = (dot64(&u, &bv), dot64(&v, &bu));
-            let scale = dot64(&u, &bu).abs().sqrt() * dot64(&v, &bv).abs().sqrt();
-            assert!(
-                (ubv - vbu).abs() <= eps * scale,
-                "{name}: uᵀBv = {ubv}, vᵀBu = {vbu}"
-            );
-            assert!(dot64(&u, &bu) > 0.0, "{name}: uᵀBu ≤ 0");
-            for (z, m) in bu.iter().zip(&mask) {
-                if *m == 0.0 {
-                    assert_eq!(*z, Vector::ZERO, "{name}: cut-loose particle moved");
+        check_cycle(
+            name,
+            &mut mg,
+            &a,
+            &mask,
+            &mut r,
+            |_| {},
+            |bu| {
+                for (z, m) in bu.iter().zip(&mask) {
+                    if *m == 0.0 {
+                        assert_eq!(*z, Vector::ZERO, "{name}: cut-loose particle moved");
+                    }
                 }
-            }
-        }
+            },
+        );
 
         let tol = if F64 { 1e-10 } else { 1e-5 };
         let solve = |pre: Preconditioner| {
@@ -1225,30 +1252,7 @@ fn multigrid_on_a_filtered_system_keeps_the_free_directions_and_solves() {
     let mut mg = Multigrid::default();
     mg.setup_filtered(&a, &mask, &filters);
     assert!(mg.levels() >= 3, "a hierarchy: {:?}", mg.sizes());
-    let random = |r: &mut u64| -> Vec<Vector> {
-        let mut v: Vec<Vector> = (0..n)
-            .map(|i| {
-                Vector::new(lcg(r) as Scalar, lcg(r) as Scalar, lcg(r) as Scalar) * (2.0 * mask[i])
-                    - Vector::ONE * mask[i]
-            })
-            .collect();
-        filter(&mut v);
-        v
-    };
-    let (mut bu, mut bv) = (vec![Vector::ZERO; n], vec![Vector::ZERO; n]);
-    // As for the unfiltered cycle: f32 sums of thousands of terms, relative.
-    let eps = if F64 { 1e-10 } else { 1e-4 };
-    for _ in 0..10 {
-        let (u, v) = (random(&mut r), random(&mut r));
-        mg.apply(&a, &mask, &u, &mut bu);
-        mg.apply(&a, &mask, &v, &mut bv);
-        let (ubv, vbu) = (dot64(&u, &bv), dot64(&v, &bu));
-        let scale = dot64(&u, &bu).abs().sqrt() * dot64(&v, &bv).abs().sqrt();
-        assert!(
-            (ubv - vbu).abs() <= eps * scale,
-            "uᵀBv = {ubv}, vᵀBu = {vbu}"
-        );
-        assert!(dot64(&u, &bu) > 0.0, "uᵀBu ≤ 0");
+    check_cycle("filtered", &mut mg, &a, &mask, &mut r, filter, |bu| {
         // No part along a held direction: `(I − S) z` is the projector's round-off of `z`.
         let size = bu.iter().fold(0.0f64, |m, z| m.max(z.length() as f64));
         for &(i, s) in &filters {
@@ -1259,7 +1263,7 @@ fn multigrid_on_a_filtered_system_keeps_the_free_directions_and_solves() {
                 "particle {i}: {off} along its held directions"
             );
         }
-    }
+    });
 
     let tol = if F64 { 1e-10 } else { 1e-5 };
     let solve = |pre: Preconditioner| {

@@ -968,35 +968,8 @@ fn a_scaled_collider_is_as_large_as_it_looks() {
 /// guard stops it first.
 #[test]
 fn holding_the_triangles_keeps_a_cloth_on_a_thin_rod_from_wedging() {
-    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
-    use bevy_soft_body::core::collide::{ColliderDesc, ShapeDesc};
-    let p = ClothPileParams {
-        cloths: 1,
-        size: 0.6,
-        self_collision: None,
-        ..Default::default()
-    }
-    .with_resolution(32);
-    let mut scene = cloth_pile(&p).unwrap();
-    let material = scene.colliders[1].material;
-    scene.colliders[1] = ColliderDesc {
-        shape: ShapeDesc::Capsule {
-            half_height: 0.8,
-            radius: 0.01,
-        },
-        motion: Motion::Fixed {
-            position: [0.0, 0.3, 0.0],
-        },
-        // The capsule's axis (y) turned onto z.
-        rotation: [
-            std::f64::consts::FRAC_1_SQRT_2,
-            0.0,
-            0.0,
-            std::f64::consts::FRAC_1_SQRT_2,
-        ],
-        material,
-    };
-    let (n, edge) = (32, (p.size / 31.0) as f32);
+    let scene = common::cloth_on_a_rod(0.01, 0.3);
+    let (n, edge) = (32, (0.6 / 31.0) as f32);
     let mut results = vec![];
     for hold_faces in [true, false] {
         let mut app = app();

@@ -7,6 +7,43 @@ pub mod intersect;
 #[allow(unused_imports)] // not every test file uses the app helpers
 pub use plugin::*;
 
+/// The cloth pile's single 32² cloth over 0.6 m (cells of 1.94 cm, self-collision off),
+/// dropped from 0.75 m with the sphere replaced by a rod: a capsule of radius `radius`
+/// (1.6 m long) lying along z at height `y`, with the pile's contact material. Its cell size
+/// is `0.6 / 31` m.
+pub fn cloth_on_a_rod(radius: f64, y: f64) -> bevy_soft_body::core::scene::Scene {
+    use bevy_soft_body::core::build::{ClothPileParams, cloth_pile};
+    use bevy_soft_body::core::collide::{ColliderDesc, ShapeDesc};
+    use bevy_soft_body::core::motion::Motion;
+    let p = ClothPileParams {
+        cloths: 1,
+        size: 0.6,
+        self_collision: None,
+        ..Default::default()
+    }
+    .with_resolution(32);
+    let mut scene = cloth_pile(&p).unwrap();
+    let material = scene.colliders[1].material;
+    scene.colliders[1] = ColliderDesc {
+        shape: ShapeDesc::Capsule {
+            half_height: 0.8,
+            radius,
+        },
+        motion: Motion::Fixed {
+            position: [0.0, y, 0.0],
+        },
+        // The capsule's axis (y) turned onto z.
+        rotation: [
+            std::f64::consts::FRAC_1_SQRT_2,
+            0.0,
+            0.0,
+            std::f64::consts::FRAC_1_SQRT_2,
+        ],
+        material,
+    };
+    scene
+}
+
 /// A lying cloth whose border is pinned, a trampoline: 21 × 21 particles of 20 g, 2 m square
 /// (cells of 10 cm, diagonals of 14 cm), at height 0, with no collider.
 pub fn trampoline() -> bevy_soft_body::core::scene::Scene {
