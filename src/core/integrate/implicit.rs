@@ -4,7 +4,7 @@ use super::{Integrator, IntegratorKind, IntegratorStats, StepError, check_h};
 use crate::core::collide::NormalHolds;
 use crate::core::jacobian::Linearization;
 use crate::core::ode::{OdeState, OdeSystem, ParticleState};
-use crate::core::solve::{LinearSolver, Pcg, PcgReport, SpringMatrix};
+use crate::core::solve::{LinearSolver, Pcg, PcgReport, SpringMatrix, filter_rows};
 use crate::math::{Matrix3, Scalar, Vector};
 
 /// What every implicit step starts with: the step size checked, the system's linearization
@@ -488,14 +488,6 @@ impl BackwardEuler {
     }
 }
 
-/// Projects each held particle's entry of `g` onto the directions it stays free in
-/// ([`NormalHolds::filters`]).
-fn filter(filters: &[(u32, Matrix3)], g: &mut [Vector]) {
-    for &(i, s) in filters {
-        g[i as usize] = s * g[i as usize];
-    }
-}
-
 /// Puts backward Euler's velocities `v` on the holds in `holds.raw`
 /// ([`NormalHolds::settle`]) and returns `Φ` there, its gradient in `g` filtered. Velocities
 /// at which `Φ` is not finite (an element inverted by a held corner's velocity) are not
@@ -519,7 +511,7 @@ fn settle_on_holds(
     stats.evaluations += 1;
     let held = lin.incremental_potential(t_end, h, x0, v0, v, x, Some(g));
     if held.is_finite() {
-        filter(&holds.filters, g);
+        filter_rows(&holds.filters, g);
         return held;
     }
     holds.clear();
@@ -807,7 +799,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                     };
                 }
                 // Along the held particles' free directions only: `−S D⁻¹ S ∇Φ` descends.
-                filter(&self.holds.filters, &mut self.d);
+                filter_rows(&self.holds.filters, &mut self.d);
                 slope = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
                 if slope.is_nan() || slope >= 0.0 {
                     break;
@@ -864,7 +856,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             );
             debug_assert!(phi <= trial || (phi - trial).abs() <= 1e-3 * trial.abs().max(1.0));
             self.stats.evaluations += 1;
-            filter(&self.holds.filters, &mut self.g);
+            filter_rows(&self.holds.filters, &mut self.g);
             // The active set (as `solve_holding` runs it for the linear solves, but within the
             // Newton iteration): triangles that this iterate's end of the step takes into
             // colliders are held as well, at most `HOLD_ROUNDS` times a step, and the

@@ -769,6 +769,14 @@ fn symmetric_rows(
     change
 }
 
+/// `vᵢ ← Sᵢ vᵢ` for each filtered particle `(i, Sᵢ)`: the directions it stays free in (see
+/// [`Pcg::solve_filtered`]).
+pub(crate) fn filter_rows(filters: &[(u32, Matrix3)], v: &mut [Vector]) {
+    for &(i, s) in filters {
+        v[i as usize] = s * v[i as usize];
+    }
+}
+
 /// `Σ a_i · b_i` over rows `r`.
 fn dot(a: &[Vector], b: &[Vector], r: Range<usize>) -> Scalar {
     a[r.clone()].iter().zip(&b[r]).map(|(x, y)| x.dot(*y)).sum()
@@ -905,11 +913,7 @@ impl Pcg {
     ) -> PcgReport {
         let n = op.matrix().len();
         // The filters' rows after each masked pass (a few particles: on the caller).
-        let filter = |v: &mut [Vector]| {
-            for &(i, s) in filters {
-                v[i as usize] = s * v[i as usize];
-            }
-        };
+        let filter = |v: &mut [Vector]| filter_rows(filters, v);
         // r = S (b − A x), and ‖S b‖²
         op.mul_map(x, &mut self.r, |i, ax| (b[i] - ax) * mask[i], None);
         filter(&mut self.r);

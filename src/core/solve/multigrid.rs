@@ -42,7 +42,7 @@
 //! the unfiltered matrix instead, the coarse levels would move held particles along their
 //! normals, which the filtered system forbids.
 
-use super::{AT_JI, Product, SpringMatrix, for_each_rows};
+use super::{AT_JI, Product, SpringMatrix, filter_rows, for_each_rows};
 use crate::core::kernels::{self, SharedMut};
 use crate::math::{Matrix3, Scalar, Vector};
 
@@ -763,13 +763,6 @@ impl Multigrid {
                 filter_rows(&self.held, &mut z[..n]);
             }
         }
-    }
-}
-
-/// `vᵢ ← Sᵢ vᵢ` for each held particle `(i, Sᵢ)`.
-fn filter_rows(held: &[(u32, Matrix3)], v: &mut [Vector]) {
-    for &(i, s) in held {
-        v[i as usize] = s * v[i as usize];
     }
 }
 
