@@ -408,7 +408,7 @@ fn plane_basis(n: [f64; 3]) -> [[f64; 3]; 2] {
 }
 
 #[test]
-fn direction_filtered_pcg_equals_the_solve_on_the_free_directions() {
+fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
     // Particles held along a direction (a contact normal) keep their starting value's part
     // along it and are free across it. The reference: with `U` a basis of the free directions
     // (three axes per free particle, the plane normal to `n` per held one, none for the pin),
@@ -538,6 +538,44 @@ fn direction_filtered_pcg_equals_the_solve_on_the_free_directions() {
                 );
             }
         }
+        // The sparse Cholesky of the filtered system `S A S + (I − S)`: the same answer, to
+        // round-off of a direct solve in f64 (the matrix's own entries are the precision's).
+        let direct = if F64 { 1e-10 } else { 1e-4 };
+        let mut chol = SparseCholesky::new();
+        let mut x = x0.clone();
+        let rep = chol.solve_filtered(&a, &b, &mut x, &mask, &holds.filters);
+        println!("{case}, Cholesky: {rep:?}");
+        assert!(rep.converged && !rep.failed, "{case}: {rep:?}");
+        assert!(rep.relative_residual <= direct as Scalar, "{case}: {rep:?}");
+        for r in 0..3 * n {
+            let got = x[r / 3][r % 3] as f64;
+            assert!(
+                (got - xr[r]).abs() <= direct * scale,
+                "{case}, Cholesky, dof {r}: {got} vs {}",
+                xr[r]
+            );
+        }
+        // Its factor serves the same filters again (modified Newton), and no others.
+        let mut again = x0.clone();
+        let rep = chol
+            .resolve(&a, &b, &mut again, &mask, &holds.filters)
+            .expect("the factor of these filters");
+        assert!(rep.converged, "{case}: {rep:?}");
+        assert_eq!(again, x, "{case}: the same factor, the same substitution");
+        assert!(
+            chol.resolve(&a, &b, &mut again, &mask, &holds.filters[1..])
+                .is_none(),
+            "{case}: a factor used for other filters"
+        );
+        assert!(
+            chol.resolve(&a, &b, &mut again, &mask, &[]).is_none(),
+            "{case}: a filtered factor used unfiltered"
+        );
+        // With no filters, the plain solve's bits.
+        let (mut p, mut q) = (x0.clone(), x0.clone());
+        let rp = SparseCholesky::new().solve(&a, &b, &mut p, &mask);
+        let rq = chol.solve_filtered(&a, &b, &mut q, &mask, &[]);
+        assert_eq!((p, rp), (q, rq), "{case}");
     }
 }
 

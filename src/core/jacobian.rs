@@ -305,6 +305,12 @@ pub trait Linearization: Sync {
         let _ = (t, h, state, f, mask);
         holds.clear();
     }
+    /// True when [`Linearization::hold_faces`] and [`Linearization::hold_faces_trial`] can
+    /// hold anything (a surface whose triangles meet colliders, and holding switched on):
+    /// steps skip building trial ends otherwise. False by default.
+    fn may_hold_faces(&self) -> bool {
+        false
+    }
     /// Adds to `holds` the corners of triangles that the trial end of the step in
     /// `holds.trial` takes into colliders
     /// ([`Collider::hold_faces_trial`](crate::core::collide::Collider::hold_faces_trial));
@@ -530,7 +536,7 @@ impl Linearization for ParticleModel {
         holds: &mut NormalHolds,
     ) {
         holds.clear();
-        if !self.hold_faces || self.contact_faces.is_empty() || self.colliders.is_empty() {
+        if !self.may_hold_faces() {
             return;
         }
         for c in &self.colliders {
@@ -554,6 +560,10 @@ impl Linearization for ParticleModel {
         }
     }
 
+    fn may_hold_faces(&self) -> bool {
+        self.hold_faces && !self.contact_faces.is_empty() && !self.colliders.is_empty()
+    }
+
     fn hold_faces_trial(
         &self,
         t: Scalar,
@@ -562,7 +572,7 @@ impl Linearization for ParticleModel {
         mask: &[Scalar],
         holds: &mut NormalHolds,
     ) -> bool {
-        if !self.hold_faces || self.contact_faces.is_empty() || self.colliders.is_empty() {
+        if !self.may_hold_faces() {
             return false;
         }
         let mut added = 0;

@@ -52,8 +52,8 @@ pub struct ParticleModel {
     /// particles alone touch colliders); tested only against colliders that can come between
     /// a surface's particles, see [`Collider::needs_faces`].
     pub contact_faces: Vec<[u32; 3]>,
-    /// Implicit steps with a solver that filters directions (PCG: linearly implicit Euler, the
-    /// trapezoid with implicit damping, backward Euler's Newton iteration) hold the corners of
+    /// Implicit steps (linearly implicit Euler, the trapezoid with implicit damping, backward
+    /// Euler's Newton iteration; with PCG or the sparse Cholesky) hold the corners of
     /// triangles resting on colliders, or that the step would take into them, along the
     /// contact normals inside the solve
     /// ([`Linearization::hold_faces`](crate::core::jacobian::Linearization::hold_faces)),

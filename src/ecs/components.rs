@@ -135,13 +135,13 @@ pub struct SoftBody {
     /// Stop the body when its internal energy exceeds this multiple of its energy scale
     /// (`None`: only non-finite states stop it).
     pub energy_guard: Option<f32>,
-    /// Implicit methods with PCG hold the corners of the body's triangles resting on
+    /// Implicit methods hold the corners of the body's triangles resting on
     /// colliders that need its triangles (rods, small balls, box edges) along the contact
     /// normals inside the solve, so a cloth on a rod about as wide as its cells hangs on it
     /// instead of wedging ([`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces)).
     /// Default: on. Off, the triangles are left to the contact after the step alone, which
     /// costs less (the 64² cloth on a rod 1.0–1.6 times less) but may wedge the cloth.
-    /// Explicit methods and the Cholesky solver never hold them.
+    /// Explicit methods never hold them.
     pub hold_faces: bool,
 }
 

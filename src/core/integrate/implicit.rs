@@ -176,6 +176,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             &mut self.v1,
             |i, v1| x[i] + (v[i] + v1) * (0.5 * h * mask[i]),
             |filters, v1| pcg.solve_filtered(a, rhs, v1, mask, filters),
+            true,
             &mut self.stats,
         );
         if self.last.failed {
@@ -206,7 +207,10 @@ const HOLD_ROUNDS: u32 = 3;
 /// the step's start; then, while the solve's trial end of the step (`end(i, xᵢ)`: particle
 /// `i`'s position for unknown `xᵢ`) takes triangles into colliders, those are held as well
 /// and the system solved again from the last answer (at most [`HOLD_ROUNDS`] times). `base`
-/// is what [`NormalHolds::settle`] takes. Counts each solve in `stats`.
+/// is what [`NormalHolds::settle`] takes. Counts each solve in `stats`. When the first solve
+/// fails, the holds are dropped and the system solved without them if `last_try`; otherwise
+/// the failure is returned with the holds kept, for the caller's next try (a projected
+/// matrix).
 #[allow(clippy::too_many_arguments)]
 fn solve_holding(
     lin: &dyn Linearization,
@@ -218,12 +222,16 @@ fn solve_holding(
     x: &mut [Vector],
     end: impl Fn(usize, Vector) -> Vector,
     mut solve: impl FnMut(&[(u32, Matrix3)], &mut [Vector]) -> PcgReport,
+    last_try: bool,
     stats: &mut IntegratorStats,
 ) -> PcgReport {
     holds.settle(base, x);
     let mut report = solve(&holds.filters, x);
     stats.linear_solves += 1;
     stats.linear_iterations += report.iterations as u64;
+    if report.failed && !last_try {
+        return report;
+    }
     if report.failed && !holds.filters.is_empty() {
         // Round-off can end a filtered solve that needs hundreds of iterations with a
         // non-positive curvature: solved without the holds instead, as before them (the
@@ -234,7 +242,8 @@ fn solve_holding(
         stats.linear_iterations += report.iterations as u64;
     }
     let n = lin.particles().min(x.len());
-    for _ in 0..HOLD_ROUNDS {
+    let rounds = if lin.may_hold_faces() { HOLD_ROUNDS } else { 0 };
+    for _ in 0..rounds {
         if report.failed {
             break;
         }
@@ -286,19 +295,13 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         lin.total_forces(t, ps, &mut self.f0);
         // Triangles resting on colliders, or that the step would take into them: their
-        // corners held along the normals inside the solve, where the solver can filter
-        // directions (PCG; the Cholesky leaves them to the contact after the step).
-        let filtering = self.solver.filters();
-        if filtering {
-            lin.hold_faces(t, h, ps, &self.f0, &self.mask, &mut self.holds);
-        } else {
-            self.holds.clear();
-        }
+        // corners held along the normals inside the solve.
+        lin.hold_faces(t, h, ps, &self.f0, &self.mask, &mut self.holds);
         // Elements with a costly projection (tets): try their exact Hessians first, project
         // only if the matrix turns out indefinite.
         let lazy = self.definite && lin.has_costly_projection();
         let tries: &[bool] = if lazy { &[false, true] } else { &[true] };
-        for &project in tries {
+        for (k, &project) in tries.iter().enumerate() {
             if lazy {
                 lin.assemble_elements(ps, h, project, a, &mut self.kv);
             } else {
@@ -311,30 +314,20 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 self.dv[i] *= self.mask[i];
             }
             let (solver, rhs, mask) = (&mut self.solver, &self.rhs, &self.mask);
-            self.last = if filtering {
-                let (x, v) = (&ps.x, &ps.v);
-                solve_holding(
-                    lin,
-                    (t, h),
-                    ps,
-                    mask,
-                    &mut self.holds,
-                    Some(v),
-                    &mut self.dv,
-                    |i, dv| x[i] + (v[i] + dv) * (h * mask[i]),
-                    |filters, dv| {
-                        solver
-                            .solve_filtered(a, rhs, dv, mask, filters)
-                            .unwrap_or_else(|| solver.solve(a, rhs, dv, mask))
-                    },
-                    &mut self.stats,
-                )
-            } else {
-                self.stats.linear_solves += 1;
-                let report = solver.solve(a, rhs, &mut self.dv, mask);
-                self.stats.linear_iterations += report.iterations as u64;
-                report
-            };
+            let (x, v) = (&ps.x, &ps.v);
+            self.last = solve_holding(
+                lin,
+                (t, h),
+                ps,
+                mask,
+                &mut self.holds,
+                Some(v),
+                &mut self.dv,
+                |i, dv| x[i] + (v[i] + dv) * (h * mask[i]),
+                |filters, dv| solver.solve_filtered(a, rhs, dv, mask, filters),
+                k + 1 == tries.len(),
+                &mut self.stats,
+            );
             if !self.last.failed {
                 break;
             }
@@ -395,7 +388,7 @@ pub struct NewtonReport {
 /// *Incremental Potential Contact*, Algorithm 1; a step that small is taken whole, without a
 /// line search). The Hessian `M + h D + h² K` is projected to positive definite per spring by
 /// default, so every Newton direction descends. Fully implicit: it dissipates energy and is
-/// stable at any `h`. With a solver that filters directions (PCG) and
+/// stable at any `h`. With
 /// [`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces), the
 /// corners of a surface's triangles resting on colliders, or that an iterate takes into them,
 /// are held along the contact normals ([`NormalHolds`]): Φ is minimized over the velocities
@@ -599,31 +592,27 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             );
             self.stats.evaluations += 1;
         }
-        // Triangles resting on colliders, where the solver can filter directions (PCG): their
-        // corners held along the contact normals (see `NormalHolds`), the Newton iteration
-        // minimizing Φ over the velocities that keep the holds, its gradient and directions
-        // projected onto the free ones. What presses a triangle onto a collider is `−∇Φ` at
-        // the first guess: at `v = v₀` that is `h f(x₀ + h v₀)`.
-        let filtering = self.solver.filters();
-        self.holds.clear();
-        if filtering {
-            for i in 0..n {
-                self.vt[i] = -self.g[i];
-            }
-            lin.hold_faces(t, h, ps, &self.vt, &self.mask, &mut self.holds);
-            if !self.holds.raw.is_empty() {
-                phi = settle_on_holds(
-                    lin,
-                    (t_end, h),
-                    (&self.x0, &self.v0),
-                    &mut self.holds,
-                    &mut self.v,
-                    &mut self.x,
-                    &mut self.g,
-                    phi,
-                    &mut self.stats,
-                );
-            }
+        // Triangles resting on colliders: their corners held along the contact normals (see
+        // `NormalHolds`), the Newton iteration minimizing Φ over the velocities that keep the
+        // holds, its gradient and directions projected onto the free ones. What presses a
+        // triangle onto a collider is `−∇Φ` at the first guess: at `v = v₀` that is
+        // `h f(x₀ + h v₀)`.
+        for i in 0..n {
+            self.vt[i] = -self.g[i];
+        }
+        lin.hold_faces(t, h, ps, &self.vt, &self.mask, &mut self.holds);
+        if !self.holds.raw.is_empty() {
+            phi = settle_on_holds(
+                lin,
+                (t_end, h),
+                (&self.x0, &self.v0),
+                &mut self.holds,
+                &mut self.v,
+                &mut self.x,
+                &mut self.g,
+                phi,
+                &mut self.stats,
+            );
         }
         let mut rounds = 0;
         let mut full_step = false;
@@ -695,7 +684,13 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                         self.vt[i] = -self.g[i] * self.mask[i];
                         self.d[i] = Vector::ZERO;
                     }
-                    match self.solver.resolve(a, &self.vt, &mut self.d, &self.mask) {
+                    match self.solver.resolve(
+                        a,
+                        &self.vt,
+                        &mut self.d,
+                        &self.mask,
+                        &self.holds.filters,
+                    ) {
                         Some(r) if !r.failed => {
                             slope = (0..n).map(|i| self.g[i].dot(self.d[i]) as f64).sum();
                             solve = r;
@@ -715,7 +710,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                 (false, true) => &[false, true],
                 (false, false) => &[true],
             };
-            for &project in tries {
+            for (k, &project) in tries.iter().enumerate() {
                 if lazy {
                     lin.assemble_incremental_hessian_elements(h, &self.x0, &self.x, project, a);
                 } else {
@@ -725,19 +720,21 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                     self.vt[i] = -self.g[i] * self.mask[i];
                     self.d[i] = Vector::ZERO;
                 }
-                solve = if self.holds.filters.is_empty() {
-                    self.solver.solve(a, &self.vt, &mut self.d, &self.mask)
-                } else {
-                    self.solver
-                        .solve_filtered(a, &self.vt, &mut self.d, &self.mask, &self.holds.filters)
-                        .unwrap_or_else(|| self.solver.solve(a, &self.vt, &mut self.d, &self.mask))
-                };
+                solve = self.solver.solve_filtered(
+                    a,
+                    &self.vt,
+                    &mut self.d,
+                    &self.mask,
+                    &self.holds.filters,
+                );
                 self.stats.linear_solves += 1;
                 self.stats.linear_iterations += solve.iterations as u64;
-                if solve.failed && !self.holds.filters.is_empty() {
+                if solve.failed && !self.holds.filters.is_empty() && k + 1 == tries.len() {
                     // Round-off can end a filtered solve with a non-positive curvature (see
                     // `solve_holding`): the holds are dropped for the rest of the step, the
-                    // contact after it stopping what goes in, as before them.
+                    // contact after it stopping what goes in, as before them. Not before the
+                    // last try: an exact element Hessian that is indefinite fails with or
+                    // without the holds, and its projection takes them.
                     self.holds.clear();
                     phi = lin.incremental_potential(
                         t_end,
@@ -861,7 +858,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             // Newton iteration): triangles that this iterate's end of the step takes into
             // colliders are held as well, at most `HOLD_ROUNDS` times a step, and the
             // iteration goes on from the velocities that keep the holds.
-            if filtering && rounds < HOLD_ROUNDS {
+            if rounds < HOLD_ROUNDS && lin.may_hold_faces() {
                 self.holds.trial.clear();
                 let (x0, v) = (&self.x0, &self.v);
                 self.holds.trial.extend((0..n).map(|i| x0[i] + v[i] * h));

@@ -9,7 +9,7 @@
 //! (no allocation per solve).
 
 use super::{PcgReport, SpringMatrix};
-use crate::math::{Scalar, ToScalar, Vector};
+use crate::math::{Matrix3, Scalar, ToScalar, Vector};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::SupernodalThreshold;
@@ -56,6 +56,11 @@ pub struct SparseCholesky {
     q: Vec<Vector>,
     /// True when `analysis.l_values` holds the factor of the last matrix solved with.
     factored: bool,
+    /// The filters that matrix was solved with (see [`SparseCholesky::solve_filtered`]).
+    factored_filters: Vec<(u32, Matrix3)>,
+    /// Each particle's place in the filters being solved with (`u32::MAX`: none); every
+    /// entry is `u32::MAX` between solves.
+    filter_of: Vec<u32>,
     /// Symbolic analyses done so far (one per structure change).
     pub analyses: u64,
 }
@@ -253,6 +258,32 @@ impl SparseCholesky {
         x: &mut [Vector],
         mask: &[Scalar],
     ) -> PcgReport {
+        self.solve_filtered(a, b, x, mask, &[])
+    }
+
+    /// [`SparseCholesky::solve`] with some particles free only along directions
+    /// (`filters`: a particle and the projector `S = I − Σ nₖnₖᵀ` onto the directions it is
+    /// free in), as [`super::Pcg::solve_filtered`] takes them. A filtered particle's `x` is
+    /// `S y + (I − S) x₀`: its start value's part outside `S` kept (prescribed), `y` the
+    /// unknown. The factored matrix is Baraff and Witkin's filtered system made whole,
+    /// `Â = S A S + (I − S)` (Ascher and Boxerman, *On the modified conjugate gradient method
+    /// in cloth simulation*, 2003): block `(i, j)` is `Sᵢ A_ij S_j`, and `I − Sᵢ` on a filtered
+    /// diagonal block fixes the held directions' unknowns at zero. Its right-hand side is
+    /// `S (b − A x_c)`, `x_c` the known values (constrained particles' `x`, the filtered ones'
+    /// `(I − S) x₀`). `Â` has `A`'s structure, so the symbolic analysis is shared with the
+    /// unfiltered solves; it is positive definite wherever `A` is on the free directions. With
+    /// no filters this is [`SparseCholesky::solve`], bit for bit.
+    ///
+    /// # Panics
+    /// If a filter's particle is not in the matrix.
+    pub fn solve_filtered(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) -> PcgReport {
         self.factored = false;
         if !self
             .analysis
@@ -262,23 +293,76 @@ impl SparseCholesky {
             self.analysis = Self::analyse(a, mask);
             self.analyses += 1;
         }
-        let Some(bnorm2) = self.right_hand_side(a, b, x, mask) else {
+        self.set_filters(a.len(), filters);
+        let report = self.factor_and_substitute(a, b, x, mask, filters);
+        self.clear_filters(filters);
+        if self.factored {
+            self.factored_filters.clear();
+            self.factored_filters.extend_from_slice(filters);
+        }
+        report
+    }
+
+    /// Marks each filtered particle's place in `filter_of`.
+    fn set_filters(&mut self, n: usize, filters: &[(u32, Matrix3)]) {
+        if self.filter_of.len() < n {
+            self.filter_of.resize(n, u32::MAX);
+        }
+        for (k, &(i, _)) in filters.iter().enumerate() {
+            self.filter_of[i as usize] = k as u32;
+        }
+    }
+
+    /// Puts `filter_of` back to all `u32::MAX`.
+    fn clear_filters(&mut self, filters: &[(u32, Matrix3)]) {
+        for &(i, _) in filters {
+            self.filter_of[i as usize] = u32::MAX;
+        }
+    }
+
+    /// Particle `i`'s projector among `filters`, if it has one.
+    fn filter(filter_of: &[u32], filters: &[(u32, Matrix3)], i: usize) -> Option<Matrix3> {
+        match filter_of[i] {
+            u32::MAX => None,
+            k => Some(filters[k as usize].1),
+        }
+    }
+
+    /// Assembles `Â`, factors it and substitutes (`filter_of` set for `filters`).
+    fn factor_and_substitute(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) -> PcgReport {
+        let Some(bnorm2) = self.right_hand_side(a, b, x, mask, filters) else {
             return failed();
         };
         let Some(an) = self.analysis.as_mut() else {
             return failed();
         };
+        let filter = |i: usize| Self::filter(&self.filter_of, filters, i);
         // Values of the free-free upper triangle.
         self.values.clear();
         self.values.resize(an.row_idx.len(), 0.0);
         for (i, d) in a.diag.iter().enumerate() {
             if an.free[i] != u32::MAX {
+                let d = match filter(i) {
+                    None => *d,
+                    Some(s) => s * *d * s + (Matrix3::IDENTITY - s),
+                };
                 for (&p, &(c, r)) in an.diag_pos[i].iter().zip(&UPPER) {
                     self.values[p as usize] += d.col(c)[r] as f64;
                 }
             }
         }
-        for (o, slot) in a.off.iter().zip(&an.off_pos) {
+        for ((o, slot), &(i, j)) in a.off.iter().zip(&an.off_pos).zip(a.pairs()) {
+            let o = match (filter(i as usize), filter(j as usize)) {
+                (None, None) => *o,
+                (si, sj) => si.unwrap_or(Matrix3::IDENTITY) * *o * sj.unwrap_or(Matrix3::IDENTITY),
+            };
             match slot {
                 OffSlot::Skip => {}
                 OffSlot::Off(pos) => {
@@ -325,22 +409,25 @@ impl SparseCholesky {
             return failed();
         }
         self.factored = true;
-        self.substitute(a, b, x, mask, bnorm2)
+        self.substitute(a, b, x, mask, filters, bnorm2)
     }
 
     /// Solves `A' x = b` with the factor of the last matrix `A'` [`SparseCholesky::solve`]
-    /// factored (a modified Newton step: no assembly, no factorization, two triangular
-    /// solves). `a` must be that same matrix (its structure is checked; its values give the
-    /// constrained entries' coupling and the reported residual). `None` when there is no
-    /// usable factor for this structure.
+    /// or [`SparseCholesky::solve_filtered`] factored (a modified Newton step: no assembly,
+    /// no factorization, two triangular solves). `a` must be that same matrix (its structure
+    /// is checked; its values give the constrained entries' coupling and the reported
+    /// residual). `None` when there is no usable factor for this structure, or when `filters`
+    /// are not the ones it was factored with.
     pub fn resolve(
         &mut self,
         a: &SpringMatrix,
         b: &[Vector],
         x: &mut [Vector],
         mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
     ) -> Option<PcgReport> {
         if !self.factored
+            || self.factored_filters != filters
             || !self
                 .analysis
                 .as_ref()
@@ -348,14 +435,18 @@ impl SparseCholesky {
         {
             return None;
         }
-        let Some(bnorm2) = self.right_hand_side(a, b, x, mask) else {
-            return Some(failed());
+        self.set_filters(a.len(), filters);
+        let report = match self.right_hand_side(a, b, x, mask, filters) {
+            None => failed(),
+            Some(bnorm2) => self.substitute(a, b, x, mask, filters, bnorm2),
         };
-        Some(self.substitute(a, b, x, mask, bnorm2))
+        self.clear_filters(filters);
+        Some(report)
     }
 
-    /// `b_f − A_fc x_c` into `rhs` (the known values of constrained entries moved to the
-    /// right-hand side); returns `‖b_f‖²`, `None` when not finite or not analysed.
+    /// `S (b_f − A_fc x_c)` into `rhs` (the known values moved to the right-hand side:
+    /// constrained entries' `x`, filtered ones' `(I − S) x`); returns `‖S b_f‖²`, `None` when
+    /// not finite or not analysed. `filter_of` is set for `filters`.
     #[allow(clippy::needless_range_loop)] // one index over parallel arrays
     fn right_hand_side(
         &mut self,
@@ -363,13 +454,21 @@ impl SparseCholesky {
         b: &[Vector],
         x: &[Vector],
         mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
     ) -> Option<f64> {
         let n = a.len();
         let an = self.analysis.as_ref()?;
+        let filter = |i: usize| Self::filter(&self.filter_of, filters, i);
         self.xc.resize(n, Vector::ZERO);
         self.q.resize(n, Vector::ZERO);
         for i in 0..n {
             self.xc[i] = if mask[i] != 0.0 { Vector::ZERO } else { x[i] };
+        }
+        for &(i, s) in filters {
+            let i = i as usize;
+            if mask[i] != 0.0 {
+                self.xc[i] = x[i] - s * x[i];
+            }
         }
         a.mul(&self.xc, &mut self.q);
         self.rhs.resize(an.dim, 0.0);
@@ -377,18 +476,22 @@ impl SparseCholesky {
         for i in 0..n {
             let c = an.free[i];
             if c != u32::MAX {
-                let r = b[i] - self.q[i];
+                let (r, bi) = match filter(i) {
+                    None => (b[i] - self.q[i], b[i] * mask[i]),
+                    Some(s) => (s * (b[i] - self.q[i]), s * (b[i] * mask[i])),
+                };
                 for k in 0..3 {
                     self.rhs[3 * c as usize + k] = r[k] as f64;
                 }
-                bnorm2 += (b[i] * mask[i]).length_squared() as f64;
+                bnorm2 += bi.length_squared() as f64;
             }
         }
         bnorm2.is_finite().then_some(bnorm2)
     }
 
     /// Forward and back substitution with the stored factor, the free entries of `x` set from
-    /// the result, and the residual `‖b − A x‖` (filtered) for the report.
+    /// the result (a filtered particle's `S y + (I − S) x`), and the residual `‖S (b − A x)‖`
+    /// for the report. `filter_of` is set for `filters`.
     #[allow(clippy::needless_range_loop)] // one index over parallel arrays
     fn substitute(
         &mut self,
@@ -396,6 +499,7 @@ impl SparseCholesky {
         b: &[Vector],
         x: &mut [Vector],
         mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
         bnorm2: f64,
     ) -> PcgReport {
         let n = a.len();
@@ -419,14 +523,23 @@ impl SparseCholesky {
             let c = an.free[i];
             if c != u32::MAX {
                 let s = 3 * c as usize;
-                x[i] = ([self.rhs[s], self.rhs[s + 1], self.rhs[s + 2]]).to_scalar();
+                let y: Vector = ([self.rhs[s], self.rhs[s + 1], self.rhs[s + 2]]).to_scalar();
+                x[i] = match Self::filter(&self.filter_of, filters, i) {
+                    None => y,
+                    Some(s) => s * y + (x[i] - s * x[i]),
+                };
             }
         }
         // The residual, for the report (one product; direct solves should reach round-off).
         a.mul(x, &mut self.q);
         let mut r2 = 0.0f64;
         for i in 0..n {
-            r2 += ((b[i] - self.q[i]) * mask[i]).length_squared() as f64;
+            let r = (b[i] - self.q[i]) * mask[i];
+            r2 += match Self::filter(&self.filter_of, filters, i) {
+                None => r,
+                Some(s) => s * r,
+            }
+            .length_squared() as f64;
         }
         let rel = if bnorm2 > 0.0 {
             (r2 / bnorm2).sqrt()

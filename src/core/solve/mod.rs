@@ -610,9 +610,26 @@ impl LinearSolver {
 
     /// [`LinearSolver::solve`] with some particles constrained along directions only
     /// (`filters`: a particle and the projector `S = I − Σ nₖnₖᵀ` onto the directions it is
-    /// free in; [`Pcg::solve_filtered`]). `None` from the sparse Cholesky, which
-    /// eliminates whole particles only: the caller then solves without them.
+    /// free in): [`Pcg::solve_filtered`], or the sparse Cholesky of the filtered system
+    /// ([`SparseCholesky::solve_filtered`]).
     pub fn solve_filtered(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+    ) -> SolveReport {
+        match self {
+            LinearSolver::Pcg(p) => p.solve_filtered(a, b, x, mask, filters),
+            LinearSolver::Cholesky(c) => c.solve_filtered(a, b, x, mask, filters),
+        }
+    }
+
+    /// Solves with the factorization of the last matrix solved (modified Newton); `None`
+    /// when the solver keeps none (PCG) or has none for this structure and these filters.
+    /// See [`SparseCholesky::resolve`].
+    pub fn resolve(
         &mut self,
         a: &SpringMatrix,
         b: &[Vector],
@@ -621,29 +638,8 @@ impl LinearSolver {
         filters: &[(u32, Matrix3)],
     ) -> Option<SolveReport> {
         match self {
-            LinearSolver::Pcg(p) => Some(p.solve_filtered(a, b, x, mask, filters)),
-            LinearSolver::Cholesky(_) => None,
-        }
-    }
-
-    /// True when [`LinearSolver::solve_filtered`] takes filters (PCG).
-    pub fn filters(&self) -> bool {
-        matches!(self, LinearSolver::Pcg(_))
-    }
-
-    /// Solves with the factorization of the last matrix solved (modified Newton); `None`
-    /// when the solver keeps none (PCG) or has none for this structure. See
-    /// [`SparseCholesky::resolve`].
-    pub fn resolve(
-        &mut self,
-        a: &SpringMatrix,
-        b: &[Vector],
-        x: &mut [Vector],
-        mask: &[Scalar],
-    ) -> Option<SolveReport> {
-        match self {
             LinearSolver::Pcg(_) => None,
-            LinearSolver::Cholesky(c) => c.resolve(a, b, x, mask),
+            LinearSolver::Cholesky(c) => c.resolve(a, b, x, mask, filters),
         }
     }
 
