@@ -539,6 +539,37 @@ impl Multigrid {
                     *o = sum(count + e);
                 }
             });
+            // `Pᵀ S A S P` is singular along the directions every member of an aggregate is
+            // held in (a cloth lying on the ground, each particle held along the normal), and
+            // those blocks' inverses fell back to the identity, which smoothed the coarse level
+            // at the wrong scale: with springs ten times the cloth's, conjugate gradients broke
+            // down at once. The held directions get their members' stiffness back, averaged
+            // over the aggregate (`Σ (I − Sᵢ) tr(Dᵢ)/3` over the free members, `/ k`): exactly
+            // the common held directions where all are held alike, a fraction of a member's
+            // stiffness where few are. The coarse correction is the same along them (`S P`
+            // keeps nothing there), and the coarse matrix stays symmetric positive definite.
+            if !held.is_empty() {
+                let (ms, mem) = (&self.members_start, &self.members);
+                for (agg, d) in coarse.diag.iter_mut().enumerate() {
+                    let members = &mem[ms[agg] as usize..ms[agg + 1] as usize];
+                    let (mut add, mut free) = (Matrix3::ZERO, 0u32);
+                    for &i in members {
+                        let i = i as usize;
+                        if mask[i] == 0.0 {
+                            continue;
+                        }
+                        free += 1;
+                        if let Some(s) = proj(i) {
+                            let di = a.diag[i];
+                            let c = (di.x_axis.x + di.y_axis.y + di.z_axis.z) / 3.0;
+                            add += (Matrix3::IDENTITY - s) * c;
+                        }
+                    }
+                    if free > 0 && add != Matrix3::ZERO {
+                        *d += add * (1.0 / free as Scalar);
+                    }
+                }
+            }
         }
         for l in 1..self.levels.len() {
             let (done, rest) = self.levels.split_at_mut(l + 1);
