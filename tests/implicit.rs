@@ -436,10 +436,10 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
     let n6 = [unit(), unit()];
     let mut holds = NormalHolds::default();
     let vec = |v: [f64; 3]| Vector::new(v[0] as Scalar, v[1] as Scalar, v[2] as Scalar);
-    holds.raw.push((2, vec(n2), vec(n2) * 0.7));
-    holds.raw.push((5, vec(n5), vec(n5) * -1.3));
-    holds.raw.push((6, vec(n6[0]), Vector::ZERO));
-    holds.raw.push((6, vec(n6[1]), Vector::ZERO));
+    holds.raw.push((2, vec(n2), vec(n2) * 0.7, 0.0));
+    holds.raw.push((5, vec(n5), vec(n5) * -1.3, 0.0));
+    holds.raw.push((6, vec(n6[0]), Vector::ZERO, 0.0));
+    holds.raw.push((6, vec(n6[1]), Vector::ZERO, 0.0));
     let mut x0 = vec![Vector::ZERO; n];
     holds.settle(None, &mut x0);
     assert_eq!(holds.filters.len(), 3);
@@ -1265,7 +1265,7 @@ fn multigrid_solves_a_cloth_held_along_one_normal_everywhere() {
         let n = a.len();
         let mut holds = NormalHolds::default();
         for i in (0..n).filter(|&i| mask[i] != 0.0) {
-            holds.raw.push((i as u32, Vector::Y, Vector::ZERO));
+            holds.raw.push((i as u32, Vector::Y, Vector::ZERO, 0.0));
         }
         let mut x0 = vec![Vector::ZERO; n];
         holds.settle(None, &mut x0);
@@ -1345,9 +1345,11 @@ fn multigrid_on_a_filtered_system_keeps_the_free_directions_and_solves() {
     let mut holds = NormalHolds::default();
     for (k, i) in (0..n).filter(|&i| mask[i] != 0.0).step_by(23).enumerate() {
         let e = unit(&mut r);
-        holds.raw.push((i as u32, e, e * (0.1 * (k % 5) as Scalar)));
+        holds
+            .raw
+            .push((i as u32, e, e * (0.1 * (k % 5) as Scalar), 0.0));
         if k % 3 == 0 {
-            holds.raw.push((i as u32, unit(&mut r), Vector::ZERO));
+            holds.raw.push((i as u32, unit(&mut r), Vector::ZERO, 0.0));
         }
     }
     let mut x0 = vec![Vector::ZERO; n];

@@ -646,6 +646,122 @@ impl Collider {
         }
     }
 
+    /// Particles resting on this collider, held along the contact normal for the step
+    /// (Baraff and Witkin's constraint filter with one constrained direction: free to slide
+    /// and to be pulled off): each particle within the thickness plus `slack` of it at time
+    /// `t`, not moving away from its surface along the normal, pushed towards it by `f` (its
+    /// total force), and not crossing more than the thickness in the step, approaching no
+    /// faster than reaching the thickness does. Pushes the particle, the normal and the
+    /// surface's velocity with the allowed approach onto `out`, as [`Collider::hold_faces`]
+    /// does for triangles' corners. Particles with `mask` zero are left out; a collider with
+    /// a [`Response`] holds nothing.
+    #[allow(clippy::too_many_arguments)]
+    pub fn hold_points(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        slack: Scalar,
+        x: &[Vector],
+        v: &[Vector],
+        f: &[Vector],
+        inv_mass: &[Scalar],
+        mask: &[Scalar],
+        out: &mut Vec<(u32, Vector, Vector, Scalar)>,
+    ) {
+        if self.response.is_some() || h <= 0.0 {
+            return;
+        }
+        let pose = self.pose(t);
+        let material = self.material.thickness as Scalar;
+        let thick = material + slack;
+        let mu = self.material.friction as Scalar;
+        let n = x
+            .len()
+            .min(v.len())
+            .min(f.len())
+            .min(inv_mass.len())
+            .min(mask.len());
+        for i in 0..n {
+            if inv_mass[i] == 0.0 || mask[i] == 0.0 || self.clear(&pose, thick, 0.0, x[i], v[i]) {
+                continue;
+            }
+            let Some((at, nrm)) = self.contact(&pose, thick, x[i]) else {
+                continue;
+            };
+            let vc = Self::surface_velocity(&pose, x[i]);
+            let vn = (v[i] - vc).dot(nrm);
+            // Approaching faster than the thickness a step: the contact after the step knows
+            // the side it came from (its swept test); should the step take it in, the trial
+            // holds it. Sliding along the surface, at any speed, it is held.
+            if -vn * h > material {
+                continue;
+            }
+            // The distance from the collider's surface: `at` lies `thick` out along `nrm`.
+            let dist = thick - (at - x[i]).dot(nrm);
+            let allowed = -(dist - material).max(0.0) / h;
+            // Not moving away (by more than a hundredth of the thickness over the step: a
+            // particle the last step held moves along the surface with round-off across it).
+            if vn * h <= 0.01 * material && f[i].dot(nrm) <= 0.0 {
+                out.push((i as u32, nrm, vc + nrm * vn.clamp(allowed, 0.0), mu));
+            }
+        }
+    }
+
+    /// The second look of an implicit step at the particles ([`Collider::hold_points`] was
+    /// the first), as [`Collider::hold_faces_trial`] takes it at the triangles: each particle
+    /// the trial end `trial` (at `t + h`) leaves nearer the collider than its thickness, by
+    /// more than a hundredth of it, is met at the step's start `x0` (normal `n`, distance
+    /// `d₀`) and, if the trial moves it along `n` slower than `−(d₀ − thickness)⁺ / h`
+    /// relative to the surface, held along `n` at that velocity. Returns how many holds it
+    /// pushed onto `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn hold_points_trial(
+        &self,
+        t: Scalar,
+        h: Scalar,
+        x0: &[Vector],
+        trial: &[Vector],
+        inv_mass: &[Scalar],
+        mask: &[Scalar],
+        out: &mut Vec<(u32, Vector, Vector, Scalar)>,
+    ) -> usize {
+        if self.response.is_some() || h <= 0.0 {
+            return 0;
+        }
+        let (start, end) = (self.pose(t), self.pose(t + h));
+        let thick = self.material.thickness as Scalar;
+        let mu = self.material.friction as Scalar;
+        let inside = 0.99 * thick;
+        let n = x0
+            .len()
+            .min(trial.len())
+            .min(inv_mass.len())
+            .min(mask.len());
+        let before = out.len();
+        for i in 0..n {
+            if inv_mass[i] == 0.0
+                || mask[i] == 0.0
+                || self.clear(&end, inside, 0.0, trial[i], end.velocity)
+                || self.contact(&end, inside, trial[i]).is_none()
+            {
+                continue;
+            }
+            let travel = (trial[i] - x0[i]).length();
+            let reach = thick + 2.0 * travel;
+            let Some((at, nrm)) = self.contact(&start, reach, x0[i]) else {
+                continue;
+            };
+            let d0 = reach - (at - x0[i]).dot(nrm);
+            let vc = Self::surface_velocity(&start, x0[i]);
+            let allowed = -(d0 - thick).max(0.0) / h;
+            let vi = (trial[i] - x0[i]) / h;
+            if (vi - vc).dot(nrm) < allowed {
+                out.push((i as u32, nrm, vc + nrm * allowed, mu));
+            }
+        }
+        out.len() - before
+    }
+
     /// The triangles' form of [`Collider::hold`], for a surface whose cells are wider than
     /// the collider needs ([`Collider::needs_faces`]): a triangle within the thickness plus
     /// `slack` of the collider at time `t` rests on it at its closest point, and each of its
@@ -674,7 +790,7 @@ impl Collider {
         f: &[Vector],
         inv_mass: &[Scalar],
         mask: &[Scalar],
-        out: &mut Vec<(u32, Vector, Vector)>,
+        out: &mut Vec<(u32, Vector, Vector, Scalar)>,
     ) {
         if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) {
             return;
@@ -702,7 +818,7 @@ impl Collider {
             for i in ids {
                 let vn = (v[i] - vc).dot(nrm);
                 if inv_mass[i] != 0.0 && mask[i] != 0.0 && vn <= 0.0 && f[i].dot(nrm) <= 0.0 {
-                    out.push((i as u32, nrm, vc + nrm * vn.max(allowed)));
+                    out.push((i as u32, nrm, vc + nrm * vn.max(allowed), 0.0));
                 }
             }
         }
@@ -728,7 +844,7 @@ impl Collider {
         trial: &[Vector],
         inv_mass: &[Scalar],
         mask: &[Scalar],
-        out: &mut Vec<(u32, Vector, Vector)>,
+        out: &mut Vec<(u32, Vector, Vector, Scalar)>,
     ) -> usize {
         if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) || h <= 0.0 {
             return 0;
@@ -762,7 +878,7 @@ impl Collider {
             for i in ids {
                 let vi = (trial[i] - x0[i]) / h;
                 if inv_mass[i] != 0.0 && mask[i] != 0.0 && (vi - vc).dot(nrm) < allowed {
-                    out.push((i as u32, nrm, vc + nrm * allowed));
+                    out.push((i as u32, nrm, vc + nrm * allowed, 0.0));
                 }
             }
         }
@@ -1712,12 +1828,22 @@ const RESOLVE_CHUNK: usize = crate::core::kernels::chunk_limit(512, 64);
 /// by the integrator, so a step allocates nothing once the lists have grown.
 #[derive(Clone, Debug, Default)]
 pub struct NormalHolds {
-    /// Each hold: the particle, the contact's unit normal, and a velocity whose component
-    /// along the normal is the particle's prescribed velocity along it for the step.
-    pub raw: Vec<(u32, Vector, Vector)>,
+    /// Each hold: the particle, the contact's unit normal, a velocity whose component along
+    /// the normal is the particle's prescribed velocity along it for the step (and whose
+    /// other components are the collider surface's there), and the contact's friction
+    /// coefficient.
+    pub raw: Vec<(u32, Vector, Vector, Scalar)>,
     /// Each particle held and the projector `S = I − Σ eₖeₖᵀ` onto the directions it stays
     /// free in (zero when it is held along three), by particle.
     pub filters: Vec<(u32, Matrix3)>,
+    /// For each of [`NormalHolds::filters`]: the particle's first hold's normal and velocity,
+    /// and the largest friction coefficient of its holds.
+    pub contact: Vec<(Vector, Vector, Scalar)>,
+    /// Friction at the holds found at the step's start, for the implicit solve: each
+    /// particle, the hold's normal `n`, the bound `μ N` of its friction force (`N` the force
+    /// pressing it on at the start) and the collider surface's velocity `vₚ`
+    /// ([`NormalHolds::start_friction`]).
+    pub drag: Vec<(u32, Vector, Scalar, Vector)>,
     /// The positions a trial solve would end the step at (scratch).
     pub trial: Vec<Vector>,
     /// The last round's answer, kept while the next is solved (scratch).
@@ -1729,10 +1855,132 @@ impl NormalHolds {
     /// below a quarter, 14.5°) are taken as the same direction.
     const DISTINCT: Scalar = 0.25;
 
+    /// Room for the holds of `n` particles (two raw holds each), so that steps allocate
+    /// nothing as contacts come and go; grows only.
+    pub fn reserve_for(&mut self, n: usize) {
+        let grow = |len: usize, cap: usize, want: usize| want.saturating_sub(cap.max(len));
+        let r = grow(self.raw.len(), self.raw.capacity(), 2 * n);
+        self.raw.reserve(r);
+        let r = grow(self.drag.len(), self.drag.capacity(), 2 * n);
+        self.drag.reserve(r);
+        let r = grow(self.filters.len(), self.filters.capacity(), n);
+        self.filters.reserve(r);
+        let r = grow(self.contact.len(), self.contact.capacity(), n);
+        self.contact.reserve(r);
+        let r = grow(self.trial.len(), self.trial.capacity(), n);
+        self.trial.reserve(r);
+        let r = grow(self.kept.len(), self.kept.capacity(), n);
+        self.kept.reserve(r);
+    }
+
     /// Forgets the last step's holds.
     pub fn clear(&mut self) {
         self.raw.clear();
         self.filters.clear();
+        self.contact.clear();
+        self.drag.clear();
+    }
+
+    /// The sliding speed (m/s) below which friction is smoothed to zero at rest (Li et al.
+    /// 2020, *Incremental Potential Contact*, §5: `f₁(x) = 2x/ε − x²/ε²` below `ε`, 1 above):
+    /// a particle held by static friction creeps slower than this.
+    pub const STATIC_SPEED: Scalar = 1e-3;
+
+    /// Friction for the holds in [`NormalHolds::raw`] (those found at the step's start):
+    /// a hold of normal `n`, friction coefficient `μ`, on a particle pressed onto the
+    /// collider by `N = max(−p · n, 0)` (`p = press(i)`, its force at the step's start),
+    /// gets the force `−μ N f₁(|u|) u/|u|` of its sliding `u = (I − n nᵀ)(v − vₚ)` across
+    /// the normal (Coulomb's, smoothed below [`NormalHolds::STATIC_SPEED`]; the normal force
+    /// and the normal lagged from the start, as Li et al. 2020 lag them).
+    pub fn start_friction(&mut self, press: impl Fn(usize) -> Vector) {
+        self.drag.clear();
+        for &(i, n, vp, mu) in &self.raw {
+            let bound = mu * (-press(i as usize).dot(n)).max(0.0);
+            if bound > 0.0 && bound.is_finite() {
+                self.drag.push((i, n, bound, vp));
+            }
+        }
+    }
+
+    /// One hold's friction at velocity `v`: its force, and its Jacobian with respect to `v`
+    /// (symmetric, negative semi-definite), as [`NormalHolds::start_friction`] gives them.
+    fn friction_at(n: Vector, bound: Scalar, vp: Vector, v: Vector) -> (Vector, Matrix3) {
+        let eps = Self::STATIC_SPEED;
+        let outer = |a: Vector, b: Vector| Matrix3::from_cols(a * b.x, a * b.y, a * b.z);
+        let p = Matrix3::IDENTITY - outer(n, n);
+        let u = p * (v - vp);
+        let x = u.length();
+        if x < eps * 1e-3 {
+            // The limit at rest: `f₁(x)/x → 2/ε` across the normal.
+            return (-u * (2.0 * bound / eps), p * (-2.0 * bound / eps));
+        }
+        let t = u / x;
+        let (f1, df1) = if x < eps {
+            (
+                2.0 * x / eps - x * x / (eps * eps),
+                2.0 / eps - 2.0 * x / (eps * eps),
+            )
+        } else {
+            (1.0, 0.0)
+        };
+        let tt = outer(t, t);
+        (-t * (bound * f1), (tt * df1 + (p - tt) * (f1 / x)) * -bound)
+    }
+
+    /// The holds' friction as backward Euler's dissipation potential, `Σ μ N f₀(|uᵢ|)`
+    /// (`f₀' = f₁`, `f₀(0) = ε/3`), its gradient times `scale` added to `g`.
+    pub fn friction_potential(&self, v: &[Vector], scale: Scalar, g: Option<&mut [Vector]>) -> f64 {
+        let eps = Self::STATIC_SPEED;
+        let mut r = 0.0f64;
+        let mut g = g;
+        for &(i, n, bound, vp) in &self.drag {
+            let i = i as usize;
+            let u = v[i] - vp;
+            let u = u - n * n.dot(u);
+            let x = u.length();
+            let f0 = if x < eps {
+                x * x / eps - x * x * x / (3.0 * eps * eps) + eps / 3.0
+            } else {
+                x
+            };
+            r += (bound * f0) as f64;
+            if let Some(g) = g.as_deref_mut() {
+                let (f, _) = Self::friction_at(n, bound, vp, v[i]);
+                g[i] -= f * scale;
+            }
+        }
+        r
+    }
+
+    /// The Hessian of [`NormalHolds::friction_potential`] at `v`, times `scale`, onto the
+    /// diagonal blocks `diag`.
+    pub fn friction_hessian(&self, v: &[Vector], scale: Scalar, diag: &mut [Matrix3]) {
+        for &(i, n, bound, vp) in &self.drag {
+            let i = i as usize;
+            let (_, j) = Self::friction_at(n, bound, vp, v[i]);
+            diag[i] -= j * scale;
+        }
+    }
+
+    /// Coulomb friction of the holds' impacts, on the step's velocities `v` (from `v0` at
+    /// the step's start): a held particle whose velocity along its first normal the step
+    /// raised towards the prescribed one by `Δvₙ` (it was approaching the collider faster)
+    /// loses up to `μ Δvₙ` of its velocity across the normals relative to the collider's
+    /// surface, all of it when that is smaller: the rule of the contact after the step
+    /// ([`Collider::resolve`]), for the impulse the holds gave in place of its.
+    pub fn impact_friction(&self, v0: &[Vector], v: &mut [Vector]) {
+        for (&(i, s), &(n, vp, mu)) in self.filters.iter().zip(&self.contact) {
+            let i = i as usize;
+            let dvn = (vp - v0[i]).dot(n).min((v[i] - v0[i]).dot(n));
+            if !(mu > 0.0 && dvn > 0.0) {
+                continue;
+            }
+            let u = s * (v[i] - vp);
+            let ul = u.length();
+            if ul > 0.0 {
+                v[i] -= u * (mu * dvn / ul).min(1.0);
+            }
+        }
     }
 
     /// Turns [`NormalHolds::raw`] into [`NormalHolds::filters`] and writes each held
@@ -1743,19 +1991,24 @@ impl NormalHolds {
     /// implicit Euler's `Δv`), `None` when it is the velocity itself.
     pub fn settle(&mut self, base: Option<&[Vector]>, x: &mut [Vector]) {
         self.filters.clear();
+        self.contact.clear();
         // By particle, then by normal: the same list gives the same filters, whatever order
         // the colliders and faces pushed them in.
         self.raw.sort_unstable_by(|a, b| {
-            let key = |h: &(u32, Vector, Vector)| (h.0, h.1.to_array().map(|c| c.to_bits()));
+            let key = |h: &(u32, Vector, Vector, Scalar)| {
+                (h.0, h.1.to_array().map(|c| c.to_bits()), h.3.to_bits())
+            };
             key(a).cmp(&key(b))
         });
         let mut k = 0;
         while k < self.raw.len() {
-            let (i, _, vp) = self.raw[k];
+            let (i, first, vp, _) = self.raw[k];
+            let mut mu: Scalar = 0.0;
             let mut e: [Vector; 3] = [Vector::ZERO; 3];
             let mut rank = 0;
             while k < self.raw.len() && self.raw[k].0 == i {
                 let nrm = self.raw[k].1;
+                mu = mu.max(self.raw[k].3);
                 k += 1;
                 if rank == 3 {
                     continue;
@@ -1774,6 +2027,7 @@ impl NormalHolds {
             let target = vp - base.map_or(Vector::ZERO, |b| b[i]);
             x[i] = s * x[i] + held * target;
             self.filters.push((i as u32, s));
+            self.contact.push((first, vp, mu));
         }
     }
 }

@@ -291,8 +291,12 @@ pub trait Linearization: Sync {
     }
     /// Holds the corners of triangles resting on colliders along the contact normals for
     /// the step of length `h` from `t`
-    /// ([`Collider::hold_faces`](crate::core::collide::Collider::hold_faces)): fills `holds`'
-    /// raw list (cleared first); `f` is the total force at the step's start. None by default.
+    /// ([`Collider::hold_faces`](crate::core::collide::Collider::hold_faces)), and with
+    /// `points` the particles resting on colliders as well
+    /// ([`Collider::hold_points`](crate::core::collide::Collider::hold_points)): fills
+    /// `holds`' raw list (cleared first); `f` is the total force at the step's start. None
+    /// by default.
+    #[allow(clippy::too_many_arguments)]
     fn hold_faces(
         &self,
         t: Scalar,
@@ -300,20 +304,25 @@ pub trait Linearization: Sync {
         state: &ParticleState,
         f: &[Vector],
         mask: &[Scalar],
+        points: bool,
         holds: &mut NormalHolds,
     ) {
-        let _ = (t, h, state, f, mask);
+        let _ = (t, h, state, f, mask, points);
         holds.clear();
     }
     /// True when [`Linearization::hold_faces`] and [`Linearization::hold_faces_trial`] can
-    /// hold anything (a surface whose triangles meet colliders, and holding switched on):
-    /// steps skip building trial ends otherwise. False by default.
-    fn may_hold_faces(&self) -> bool {
+    /// hold anything (holding switched on, colliders, and a surface whose triangles meet
+    /// them or, with `points`, particles): steps skip building trial ends otherwise. False
+    /// by default.
+    fn may_hold_faces(&self, points: bool) -> bool {
+        let _ = points;
         false
     }
     /// Adds to `holds` the corners of triangles that the trial end of the step in
     /// `holds.trial` takes into colliders
-    /// ([`Collider::hold_faces_trial`](crate::core::collide::Collider::hold_faces_trial));
+    /// ([`Collider::hold_faces_trial`](crate::core::collide::Collider::hold_faces_trial)),
+    /// and with `points` the particles it takes into them
+    /// ([`Collider::hold_points_trial`](crate::core::collide::Collider::hold_points_trial));
     /// `state` is the step's start. Returns true when it added any. None by default.
     fn hold_faces_trial(
         &self,
@@ -321,9 +330,10 @@ pub trait Linearization: Sync {
         h: Scalar,
         state: &ParticleState,
         mask: &[Scalar],
+        points: bool,
         holds: &mut NormalHolds,
     ) -> bool {
-        let _ = (t, h, state, mask, holds);
+        let _ = (t, h, state, mask, points, holds);
         false
     }
     /// True when the system has elements whose semi-definite projection is costly (tets: a
@@ -533,10 +543,11 @@ impl Linearization for ParticleModel {
         state: &ParticleState,
         f: &[Vector],
         mask: &[Scalar],
+        points: bool,
         holds: &mut NormalHolds,
     ) {
         holds.clear();
-        if !self.may_hold_faces() {
+        if !self.may_hold_faces(points) {
             return;
         }
         for c in &self.colliders {
@@ -544,6 +555,19 @@ impl Linearization for ParticleModel {
             // held at the thickness is resting on the collider, though its nearest point may
             // have come out a little (each corner is held along one normal).
             let slack = 0.02 * c.material.thickness as Scalar;
+            if points {
+                c.hold_points(
+                    t,
+                    h,
+                    slack,
+                    &state.x,
+                    &state.v,
+                    f,
+                    self.inv_mass(),
+                    mask,
+                    &mut holds.raw,
+                );
+            }
             c.hold_faces(
                 t,
                 h,
@@ -560,8 +584,8 @@ impl Linearization for ParticleModel {
         }
     }
 
-    fn may_hold_faces(&self) -> bool {
-        self.hold_faces && !self.contact_faces.is_empty() && !self.colliders.is_empty()
+    fn may_hold_faces(&self, points: bool) -> bool {
+        self.hold_faces && !self.colliders.is_empty() && (points || !self.contact_faces.is_empty())
     }
 
     fn hold_faces_trial(
@@ -570,13 +594,25 @@ impl Linearization for ParticleModel {
         h: Scalar,
         state: &ParticleState,
         mask: &[Scalar],
+        points: bool,
         holds: &mut NormalHolds,
     ) -> bool {
-        if !self.may_hold_faces() {
+        if !self.may_hold_faces(points) {
             return false;
         }
         let mut added = 0;
         for c in &self.colliders {
+            if points {
+                added += c.hold_points_trial(
+                    t,
+                    h,
+                    &state.x,
+                    &holds.trial,
+                    self.inv_mass(),
+                    mask,
+                    &mut holds.raw,
+                );
+            }
             added += c.hold_faces_trial(
                 t,
                 h,

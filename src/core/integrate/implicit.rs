@@ -154,7 +154,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
-        lin.hold_faces(t, h, ps, &self.f, &self.mask, &mut self.holds);
+        lin.hold_faces(t, h, ps, &self.f, &self.mask, false, &mut self.holds);
         lin.assemble_damping(ps, h, a);
         let m = lin.masses();
         for i in 0..n {
@@ -242,14 +242,18 @@ fn solve_holding(
         stats.linear_iterations += report.iterations as u64;
     }
     let n = lin.particles().min(x.len());
-    let rounds = if lin.may_hold_faces() { HOLD_ROUNDS } else { 0 };
+    let rounds = if lin.may_hold_faces(false) {
+        HOLD_ROUNDS
+    } else {
+        0
+    };
     for _ in 0..rounds {
         if report.failed {
             break;
         }
         holds.trial.clear();
         holds.trial.extend((0..n).map(|i| end(i, x[i])));
-        if !lin.hold_faces_trial(t, h, ps, mask, holds) {
+        if !lin.hold_faces_trial(t, h, ps, mask, false, holds) {
             break;
         }
         // A round that does not converge keeps the last answer.
@@ -296,7 +300,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         lin.total_forces(t, ps, &mut self.f0);
         // Triangles resting on colliders, or that the step would take into them: their
         // corners held along the normals inside the solve.
-        lin.hold_faces(t, h, ps, &self.f0, &self.mask, &mut self.holds);
+        lin.hold_faces(t, h, ps, &self.f0, &self.mask, false, &mut self.holds);
         // Elements with a costly projection (tets): try their exact Hessians first, project
         // only if the matrix turns out indefinite.
         let lazy = self.definite && lin.has_costly_projection();
@@ -390,9 +394,15 @@ pub struct NewtonReport {
 /// default, so every Newton direction descends. Fully implicit: it dissipates energy and is
 /// stable at any `h`. With
 /// [`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces), the
-/// corners of a surface's triangles resting on colliders, or that an iterate takes into them,
-/// are held along the contact normals ([`NormalHolds`]): Φ is minimized over the velocities
-/// that keep the holds, its gradient and the Newton directions projected onto the free ones.
+/// corners of a surface's triangles resting on colliders, and the particles resting on
+/// colliders, or that an iterate takes into them, are held along the
+/// contact normals ([`NormalHolds`]): Φ is minimized over the velocities that keep the holds,
+/// its gradient and the Newton directions projected onto the free ones. The particles' holds
+/// have Coulomb friction as a dissipation potential of Φ (Li et al. 2020, *Incremental
+/// Potential Contact*, §5: the normal force and the normal lagged from the step's start,
+/// smoothed below [`NormalHolds::STATIC_SPEED`]), so a cloth resting on colliders comes to
+/// static equilibrium; with the contact left to after the step it came to a standstill with
+/// forces of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
 #[derive(Clone, Debug)]
 pub struct BackwardEuler {
     /// Iteration cap per step (with [`BackwardEuler::reuse_factorization`], the cap on
@@ -502,7 +512,7 @@ fn settle_on_holds(
     holds.kept.extend_from_slice(v);
     holds.settle(None, v);
     stats.evaluations += 1;
-    let held = lin.incremental_potential(t_end, h, x0, v0, v, x, Some(g));
+    let held = potential(lin, holds, t_end, h, x0, v0, v, x, Some(g));
     if held.is_finite() {
         filter_rows(&holds.filters, g);
         return held;
@@ -510,8 +520,30 @@ fn settle_on_holds(
     holds.clear();
     v.copy_from_slice(&holds.kept);
     stats.evaluations += 1;
-    lin.incremental_potential(t_end, h, x0, v0, v, x, Some(g));
-    phi
+    let free = potential(lin, holds, t_end, h, x0, v0, v, x, Some(g));
+    if free.is_finite() { free } else { phi }
+}
+
+/// Backward Euler's objective: the incremental potential
+/// ([`Linearization::incremental_potential`]) and `h` times the dissipation potential of
+/// the holds' friction ([`NormalHolds::friction_potential`]), with their gradient in `g`.
+#[allow(clippy::too_many_arguments)]
+fn potential(
+    lin: &dyn Linearization,
+    holds: &NormalHolds,
+    t_end: Scalar,
+    h: Scalar,
+    x0: &[Vector],
+    v0: &[Vector],
+    v: &[Vector],
+    x: &mut [Vector],
+    mut g: Option<&mut [Vector]>,
+) -> f64 {
+    let phi = lin.incremental_potential(t_end, h, x0, v0, v, x, g.as_deref_mut());
+    if holds.drag.is_empty() {
+        return phi;
+    }
+    phi + h as f64 * holds.friction_potential(v, h, g)
 }
 
 fn masked_norm(g: &[Vector], mask: &[Scalar]) -> Scalar {
@@ -552,6 +584,10 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         self.x0.copy_from_slice(&ps.x);
         self.v0.copy_from_slice(&ps.v);
         self.v.copy_from_slice(&ps.v);
+        // The last step's holds and their friction go: Φ is the incremental potential alone
+        // until this step's are found.
+        self.holds.clear();
+        self.holds.reserve_for(n);
         let t_end = t + h;
         lin.constrained_velocities(t_end, h, &self.x0, &mut self.v);
         let m = lin.masses();
@@ -563,7 +599,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         rep.stagnated = false;
         rep.gradient_norms.clear();
         rep.objective.clear();
-        let mut phi = lin.incremental_potential(
+        let mut phi = potential(
+            lin,
+            &self.holds,
             t_end,
             h,
             &self.x0,
@@ -581,7 +619,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                     *vi = Vector::ZERO;
                 }
             }
-            phi = lin.incremental_potential(
+            phi = potential(
+                lin,
+                &self.holds,
                 t_end,
                 h,
                 &self.x0,
@@ -600,7 +640,14 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         for i in 0..n {
             self.vt[i] = -self.g[i];
         }
-        lin.hold_faces(t, h, ps, &self.vt, &self.mask, &mut self.holds);
+        lin.hold_faces(t, h, ps, &self.vt, &self.mask, true, &mut self.holds);
+        // Their friction, as a drag whose dissipation potential joins Φ (Li et al. 2020, §5),
+        // pressed by `−∇Φ / h` at the first guess.
+        let (vt, inv_h) = (&self.vt, 1.0 / h);
+        self.holds.start_friction(|i| vt[i] * inv_h);
+        if !self.holds.drag.is_empty() {
+            phi += h as f64 * self.holds.friction_potential(&self.v, h, Some(&mut self.g));
+        }
         if !self.holds.raw.is_empty() {
             phi = settle_on_holds(
                 lin,
@@ -716,6 +763,8 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                 } else {
                     lin.assemble_incremental_hessian(h, &self.x0, &self.x, self.definite, a);
                 }
+                // The holds' friction: its dissipation potential's Hessian, times `h`.
+                self.holds.friction_hessian(&self.v, h, &mut a.diag);
                 for i in 0..n {
                     self.vt[i] = -self.g[i] * self.mask[i];
                     self.d[i] = Vector::ZERO;
@@ -736,7 +785,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                     // last try: an exact element Hessian that is indefinite fails with or
                     // without the holds, and its projection takes them.
                     self.holds.clear();
-                    phi = lin.incremental_potential(
+                    phi = potential(
+                        lin,
+                        &self.holds,
                         t_end,
                         h,
                         &self.x0,
@@ -812,7 +863,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                 for i in 0..n {
                     self.vt[i] = self.v[i] + self.d[i] * (alpha as Scalar * self.mask[i]);
                 }
-                let trial = lin.incremental_potential(
+                let trial = potential(
+                    lin,
+                    &self.holds,
                     t_end,
                     h,
                     &self.x0,
@@ -842,7 +895,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
                 rep.stagnated = true;
             }
             std::mem::swap(&mut self.v, &mut self.vt);
-            phi = lin.incremental_potential(
+            phi = potential(
+                lin,
+                &self.holds,
                 t_end,
                 h,
                 &self.x0,
@@ -858,11 +913,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
             // Newton iteration): triangles that this iterate's end of the step takes into
             // colliders are held as well, at most `HOLD_ROUNDS` times a step, and the
             // iteration goes on from the velocities that keep the holds.
-            if rounds < HOLD_ROUNDS && lin.may_hold_faces() {
+            if rounds < HOLD_ROUNDS && lin.may_hold_faces(true) {
                 self.holds.trial.clear();
                 let (x0, v) = (&self.x0, &self.v);
                 self.holds.trial.extend((0..n).map(|i| x0[i] + v[i] * h));
-                if lin.hold_faces_trial(t, h, ps, &self.mask, &mut self.holds) {
+                if lin.hold_faces_trial(t, h, ps, &self.mask, true, &mut self.holds) {
                     rounds += 1;
                     phi = settle_on_holds(
                         lin,
@@ -885,6 +940,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         if !self.v.iter().all(|v| v.is_finite()) {
             return Err(StepError::SolverFailed(kind));
         }
+        self.holds.impact_friction(&self.v0, &mut self.v);
         for i in 0..n {
             if self.mask[i] != 0.0 {
                 ps.v[i] = self.v[i];
