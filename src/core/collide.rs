@@ -1858,19 +1858,16 @@ impl NormalHolds {
     /// Room for the holds of `n` particles (two raw holds each), so that steps allocate
     /// nothing as contacts come and go; grows only.
     pub fn reserve_for(&mut self, n: usize) {
-        let grow = |len: usize, cap: usize, want: usize| want.saturating_sub(cap.max(len));
-        let r = grow(self.raw.len(), self.raw.capacity(), 2 * n);
-        self.raw.reserve(r);
-        let r = grow(self.drag.len(), self.drag.capacity(), 2 * n);
-        self.drag.reserve(r);
-        let r = grow(self.filters.len(), self.filters.capacity(), n);
-        self.filters.reserve(r);
-        let r = grow(self.contact.len(), self.contact.capacity(), n);
-        self.contact.reserve(r);
-        let r = grow(self.trial.len(), self.trial.capacity(), n);
-        self.trial.reserve(r);
-        let r = grow(self.kept.len(), self.kept.capacity(), n);
-        self.kept.reserve(r);
+        // `reserve` asks for room beyond the length and does nothing where there is room.
+        fn room<T>(v: &mut Vec<T>, want: usize) {
+            v.reserve(want.saturating_sub(v.len()));
+        }
+        room(&mut self.raw, 2 * n);
+        room(&mut self.drag, 2 * n);
+        room(&mut self.filters, n);
+        room(&mut self.contact, n);
+        room(&mut self.trial, n);
+        room(&mut self.kept, n);
     }
 
     /// Forgets the last step's holds.
@@ -1902,19 +1899,22 @@ impl NormalHolds {
         }
     }
 
-    /// One hold's friction at velocity `v`: its force, and its Jacobian with respect to `v`
-    /// (symmetric, negative semi-definite), as [`NormalHolds::start_friction`] gives them.
-    fn friction_at(n: Vector, bound: Scalar, vp: Vector, v: Vector) -> (Vector, Matrix3) {
-        let eps = Self::STATIC_SPEED;
-        let outer = |a: Vector, b: Vector| Matrix3::from_cols(a * b.x, a * b.y, a * b.z);
-        let p = Matrix3::IDENTITY - outer(n, n);
+    /// A hold's sliding at velocity `v`: `u = (I − n nᵀ)(v − vₚ)`, its length, and the
+    /// projector `I − n nᵀ`.
+    fn sliding(n: Vector, vp: Vector, v: Vector) -> (Vector, Scalar, Matrix3) {
+        let p = Matrix3::IDENTITY - Matrix3::from_cols(n * n.x, n * n.y, n * n.z);
         let u = p * (v - vp);
-        let x = u.length();
+        (u, u.length(), p)
+    }
+
+    /// Coulomb's force on a sliding `u` of length `x`, bounded by `bound` and smoothed below
+    /// [`NormalHolds::STATIC_SPEED`], and `f₁` and `f₁'` there (`None` at rest, where the
+    /// force is `−2 bound u / ε`, the limit of `f₁(x)/x`).
+    fn friction_force(u: Vector, x: Scalar, bound: Scalar) -> (Vector, Option<(Scalar, Scalar)>) {
+        let eps = Self::STATIC_SPEED;
         if x < eps * 1e-3 {
-            // The limit at rest: `f₁(x)/x → 2/ε` across the normal.
-            return (-u * (2.0 * bound / eps), p * (-2.0 * bound / eps));
+            return (-u * (2.0 * bound / eps), None);
         }
-        let t = u / x;
         let (f1, df1) = if x < eps {
             (
                 2.0 * x / eps - x * x / (eps * eps),
@@ -1923,8 +1923,20 @@ impl NormalHolds {
         } else {
             (1.0, 0.0)
         };
-        let tt = outer(t, t);
-        (-t * (bound * f1), (tt * df1 + (p - tt) * (f1 / x)) * -bound)
+        (-(u / x) * (bound * f1), Some((f1, df1)))
+    }
+
+    /// One hold's friction at velocity `v`: its force, and its Jacobian with respect to `v`
+    /// (symmetric, negative semi-definite), as [`NormalHolds::start_friction`] gives them.
+    fn friction_at(n: Vector, bound: Scalar, vp: Vector, v: Vector) -> (Vector, Matrix3) {
+        let (u, x, p) = Self::sliding(n, vp, v);
+        let (force, slope) = Self::friction_force(u, x, bound);
+        let Some((f1, df1)) = slope else {
+            return (force, p * (-2.0 * bound / Self::STATIC_SPEED));
+        };
+        let t = u / x;
+        let tt = Matrix3::from_cols(t * t.x, t * t.y, t * t.z);
+        (force, (tt * df1 + (p - tt) * (f1 / x)) * -bound)
     }
 
     /// The holds' friction as backward Euler's dissipation potential, `Σ μ N f₀(|uᵢ|)`
@@ -1935,9 +1947,7 @@ impl NormalHolds {
         let mut g = g;
         for &(i, n, bound, vp) in &self.drag {
             let i = i as usize;
-            let u = v[i] - vp;
-            let u = u - n * n.dot(u);
-            let x = u.length();
+            let (u, x, _) = Self::sliding(n, vp, v[i]);
             let f0 = if x < eps {
                 x * x / eps - x * x * x / (3.0 * eps * eps) + eps / 3.0
             } else {
@@ -1945,8 +1955,7 @@ impl NormalHolds {
             };
             r += (bound * f0) as f64;
             if let Some(g) = g.as_deref_mut() {
-                let (f, _) = Self::friction_at(n, bound, vp, v[i]);
-                g[i] -= f * scale;
+                g[i] -= Self::friction_force(u, x, bound).0 * scale;
             }
         }
         r

@@ -642,12 +642,10 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         }
         lin.hold_faces(t, h, ps, &self.vt, &self.mask, true, &mut self.holds);
         // Their friction, as a drag whose dissipation potential joins Φ (Li et al. 2020, §5),
-        // pressed by `−∇Φ / h` at the first guess.
+        // pressed by `−∇Φ / h` at the first guess; `settle_on_holds` evaluates Φ with it (a
+        // hold with friction is a hold).
         let (vt, inv_h) = (&self.vt, 1.0 / h);
         self.holds.start_friction(|i| vt[i] * inv_h);
-        if !self.holds.drag.is_empty() {
-            phi += h as f64 * self.holds.friction_potential(&self.v, h, Some(&mut self.g));
-        }
         if !self.holds.raw.is_empty() {
             phi = settle_on_holds(
                 lin,
