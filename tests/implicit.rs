@@ -474,8 +474,21 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
     }
     let dense = a.to_dense();
     // The right-hand side above, and none at all: then only the prescribed parts' coupling
-    // `−A x₀` is left to solve for (a held particle whose force is nothing but the hold).
-    for (case, b) in [("b", b.clone()), ("b = 0", vec![Vector::ZERO; n])] {
+    // `−A x₀` is left to solve for (a held particle whose force is nothing but the hold). And
+    // one nearly all along the holds, its free part 10⁻⁷ of them, as at static equilibrium
+    // on colliders (the held parts are the contact forces): the filters leave round-off of
+    // `ε ‖b‖` in the residual, far above the tolerance times `‖S b‖`. Before the solve took
+    // that floor as converged, block-Jacobi broke down on it in `f32` (a non-finite
+    // curvature at the seventh iteration).
+    let mut resting: Vec<Vector> = b.iter().map(|v| *v * 1e-7).collect();
+    for (i, d) in [(2, n2), (5, n5), (6, n6[0]), (6, n6[1])] {
+        resting[i] += vec(d) * 1e3;
+    }
+    for (case, b) in [
+        ("b", b.clone()),
+        ("b = 0", vec![Vector::ZERO; n]),
+        ("b at rest", resting),
+    ] {
         let x0f: Vec<f64> = x0
             .iter()
             .flat_map(|v| (0..3).map(|k| v[k] as f64))
@@ -546,7 +559,12 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
         let rep = chol.solve_filtered(&a, &b, &mut x, &mask, &holds.filters);
         println!("{case}, Cholesky: {rep:?}");
         assert!(rep.converged && !rep.failed, "{case}: {rep:?}");
-        assert!(rep.relative_residual <= direct as Scalar, "{case}: {rep:?}");
+        // (At rest the residual relative to `‖S b‖` is the filters' round-off: the answer
+        // below is the check.)
+        assert!(
+            case == "b at rest" || rep.relative_residual <= direct as Scalar,
+            "{case}: {rep:?}"
+        );
         for r in 0..3 * n {
             let got = x[r / 3][r % 3] as f64;
             assert!(

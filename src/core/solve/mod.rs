@@ -916,6 +916,13 @@ impl Pcg {
         let [mut bb] = sum_rows(partials, n, |rows| {
             [rows.map(|i| (b[i] * mask[i]).length_squared()).sum()]
         });
+        // The filters take the held parts out of `b` with round-off of `ε ‖b‖`, which no
+        // iteration removes from the residual: the floor it can reach.
+        let floor = if filters.is_empty() {
+            0.0
+        } else {
+            Scalar::EPSILON * bb.sqrt()
+        };
         for &(i, s) in filters {
             let bi = b[i as usize] * mask[i as usize];
             bb += (s * bi).length_squared() - bi.length_squared();
@@ -974,7 +981,21 @@ impl Pcg {
         let mut rel = rr.sqrt() / bnorm;
         let mut failed = !rel.is_finite();
         let xp = SharedMut(x.as_mut_ptr());
-        while rel > self.tolerance && it < self.max_iterations && !failed {
+        // Near static equilibrium on colliders `S b` is small against `b` (the held parts are
+        // the contact forces), and the residual reaches the filters' round-off floor above
+        // the tolerance: in `f32` filtered solves of cloths resting on colliders stagnated
+        // at relative residuals of 10⁻⁵ to 10⁻³ (`‖S b‖` 10⁻⁷ against `‖b‖` 10⁻²), their
+        // `r · z` underflowed to zero or lost its sign, and the iteration broke down or
+        // diverged (the steps then dropped their holds and threw the cloth off its rest).
+        // At the floor, or once `r · z = 0` (the residual's free part vanished: `z = M⁻¹ r`
+        // with `M` positive definite on the free directions), the solve has converged.
+        let mut exhausted = rz == 0.0;
+        while rel > self.tolerance
+            && rel * bnorm > floor
+            && it < self.max_iterations
+            && !failed
+            && !exhausted
+        {
             // q = S A p, and p · q
             // (`p = S p`, so `p · A p = p · S A p`.)
             let pq = op.mul_map(&self.p, &mut self.q, |i, ap| ap * mask[i], Some(partials));
@@ -1031,7 +1052,8 @@ impl Pcg {
             if jacobi {
                 rz_new += symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
             }
-            let beta = rz_new / rz;
+            exhausted = rz_new == 0.0;
+            let beta = if exhausted { 0.0 } else { rz_new / rz };
             rz = rz_new;
             let (pp, z) = (SharedMut(self.p.as_mut_ptr()), &self.z);
             for_each_rows(n, |rows| {
@@ -1049,7 +1071,7 @@ impl Pcg {
         PcgReport {
             iterations: it,
             relative_residual: rel,
-            converged: !failed && rel <= self.tolerance,
+            converged: !failed && (rel <= self.tolerance || rel * bnorm <= floor || exhausted),
             failed,
         }
     }
