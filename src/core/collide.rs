@@ -1844,6 +1844,11 @@ pub struct NormalHolds {
     /// pressing it on at the start) and the collider surface's velocity `vₚ`
     /// ([`NormalHolds::start_friction`]).
     pub drag: Vec<(u32, Vector, Scalar, Vector)>,
+    /// For each of [`NormalHolds::drag`], where a linear step linearized its friction: the
+    /// sliding at the step's start, the sliding there, and the force and its Jacobian with
+    /// respect to the velocity ([`NormalHolds::linearize_friction`],
+    /// [`NormalHolds::relinearize_leavers`]).
+    pub linearized: Vec<(Vector, Vector, Vector, Matrix3)>,
     /// The positions a trial solve would end the step at (scratch).
     pub trial: Vec<Vector>,
     /// The last round's answer, kept while the next is solved (scratch).
@@ -1864,6 +1869,7 @@ impl NormalHolds {
         }
         room(&mut self.raw, 2 * n);
         room(&mut self.drag, 2 * n);
+        room(&mut self.linearized, 2 * n);
         room(&mut self.filters, n);
         room(&mut self.contact, n);
         room(&mut self.trial, n);
@@ -1876,6 +1882,7 @@ impl NormalHolds {
         self.filters.clear();
         self.contact.clear();
         self.drag.clear();
+        self.linearized.clear();
     }
 
     /// The sliding speed (m/s) below which friction is smoothed to zero at rest (Li et al.
@@ -1969,6 +1976,83 @@ impl NormalHolds {
             let (_, j) = Self::friction_at(n, bound, vp, v[i]);
             diag[i] -= j * scale;
         }
+    }
+
+    /// A linear step's friction: each hold's force `F` of [`NormalHolds::drag`] (the
+    /// gradient of [`NormalHolds::friction_potential`]) linearized at the velocities `v0` of
+    /// the step's start, as the damping is: `scale F(v₀)` added to the right-hand side `rhs`
+    /// of the system in `Δv = v − v₀` and `−scale ∂F/∂v` to its diagonal blocks `diag`
+    /// (symmetric positive semi-definite). Remembers where ([`NormalHolds::linearized`]).
+    pub fn linearize_friction(
+        &mut self,
+        v0: &[Vector],
+        scale: Scalar,
+        diag: &mut [Matrix3],
+        rhs: &mut [Vector],
+    ) {
+        self.linearized.clear();
+        for &(i, n, bound, vp) in &self.drag {
+            let i = i as usize;
+            let (u, ..) = Self::sliding(n, vp, v0[i]);
+            let (force, jacobian) = Self::friction_at(n, bound, vp, v0[i]);
+            rhs[i] += force * scale;
+            diag[i] -= jacobian * scale;
+            self.linearized.push((u, u, force, jacobian));
+        }
+    }
+
+    /// After a solve of the system [`NormalHolds::linearize_friction`] made (`vel(i)`:
+    /// particle `i`'s velocity at the step's end): linearizes again the friction of each
+    /// hold whose solve left the smoothing zone `ε` = [`NormalHolds::STATIC_SPEED`] on the
+    /// other side than where it was linearized (one more Newton iteration for those, Li et
+    /// al. 2020, §5), replacing its terms in `diag` and `rhs`:
+    /// - sliding where it was linearized, and reversed by the solve: along a sliding faster
+    ///   than `ε` the linearized friction is Coulomb's constant force, and a reversed sliding
+    ///   means it would have stopped the particle within the step. Linearized about rest, as
+    ///   the drag `−μ N u / ε` (the secant of the smoothed friction over `ε`, so its force
+    ///   stays within `μ N` while `|u| ≤ ε`; a drag cannot reverse a sliding. The tangent
+    ///   there, `2 μ N / ε`, held particles against up to twice Coulomb's force: cloths
+    ///   draped on a sphere came to rest at 1.03 of the cone);
+    /// - within `ε` where it was linearized, and sliding faster than `ε` at the end: the drag
+    ///   about rest held it with more than Coulomb's force. Linearized at the end's velocity,
+    ///   where the friction is Coulomb's `μ N` against that sliding. (Without it the start of
+    ///   every slide was a step late, and in `f64` a cloth draped on a sphere slid in
+    ///   stick–slip events for seconds.)
+    ///
+    /// Returns true when it changed any, for the caller to solve again.
+    pub fn relinearize_leavers(
+        &mut self,
+        vel: impl Fn(usize) -> Vector,
+        scale: Scalar,
+        diag: &mut [Matrix3],
+        rhs: &mut [Vector],
+    ) -> bool {
+        let mut any = false;
+        let eps = Self::STATIC_SPEED;
+        for (&(i, n, bound, vp), at) in self.drag.iter().zip(&mut self.linearized) {
+            let i = i as usize;
+            let (u0, uw, force_w, jacobian_w) = *at;
+            let (u, x, p) = Self::sliding(n, vp, vel(i));
+            let xw = uw.length();
+            let next = if xw >= eps * 1e-3 && u.dot(uw) < 0.0 {
+                (u0, Vector::ZERO, Vector::ZERO, p * (-bound / eps))
+            } else if xw < eps && x > eps {
+                let (force, jacobian) = Self::friction_at(n, bound, vp, vel(i));
+                (u0, u, force, jacobian)
+            } else {
+                continue;
+            };
+            // `F(w) + J_w (v − w)` in `Δv = v − v₀`: `F(w) + J_w (u₀ − u_w) + J_w Δv` (`u₀ −
+            // u_w` is `v₀ − w` across the normal; `J_w` sees nothing along it). The last
+            // linearization's terms out, the new one's in.
+            let old = force_w + jacobian_w * (u0 - uw);
+            let new = next.2 + next.3 * (u0 - next.1);
+            rhs[i] += (new - old) * scale;
+            diag[i] += (jacobian_w - next.3) * scale;
+            *at = next;
+            any = true;
+        }
+        any
     }
 
     /// Coulomb friction of the holds' impacts, on the step's velocities `v` (from `v0` at

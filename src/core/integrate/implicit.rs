@@ -51,6 +51,19 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// solved with PCG (block-Jacobi, or multigrid for large systems) under the constraint filter
 /// (pins and prescribed particles keep `Δv = 0`), or with the sparse Cholesky. Stable far
 /// beyond explicit limits, first order, and it damps: energy is lost at large `h`.
+///
+/// With [`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces), the
+/// particles and triangles' corners resting on colliders, or that the solve takes into them,
+/// are held along the contact normals inside the solve ([`NormalHolds`]), and the particles'
+/// Coulomb friction (pressed by the forces at the step's start) joins the system linearized
+/// at the start's velocities, as the damping does: the first Newton iteration of backward
+/// Euler's friction potential (Li et al. 2020, *Incremental Potential Contact*, §5). Holds
+/// whose solve left that linearization's side of the smoothing zone (a sliding the friction
+/// reversed, a rest the particle broke free of) have it linearized again and the system is
+/// solved once more ([`NormalHolds::relinearize_leavers`]). A cloth on a slope slides as
+/// far as Coulomb's law says, and one draped on a sphere in frame-long steps comes to
+/// static equilibrium; with the contact left to after the step it came to rest with forces
+/// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
 #[derive(Clone, Debug)]
 pub struct LinearlyImplicitEuler {
     /// The linear solver (PCG by default: tolerance, iteration cap).
@@ -164,7 +177,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
         }
         // Triangles resting on colliders, or that the step would take into them: their
         // corners held along the normals inside the solve.
-        let (pcg, rhs, mask) = (&mut self.pcg, &self.rhs, &self.mask);
+        let (pcg, mask) = (&mut self.pcg, &self.mask);
         let (x, v) = (&ps.x, &ps.v);
         self.last = solve_holding(
             lin,
@@ -173,10 +186,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             mask,
             &mut self.holds,
             None,
+            (a, &mut self.rhs),
             &mut self.v1,
             |i, v1| x[i] + (v[i] + v1) * (0.5 * h * mask[i]),
-            |filters, v1| pcg.solve_filtered(a, rhs, v1, mask, filters),
-            true,
+            |a, rhs, filters, v1| pcg.solve_filtered(a, rhs, v1, mask, filters),
+            (false, true),
             &mut self.stats,
         );
         if self.last.failed {
@@ -202,15 +216,20 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
 /// trial took into colliders.
 const HOLD_ROUNDS: u32 = 3;
 
-/// A step's linear solve with triangles' corners held along contact normals (Baraff and
-/// Witkin's filter, see [`NormalHolds`]), as an active set: the holds `hold_faces` found at
-/// the step's start; then, while the solve's trial end of the step (`end(i, xᵢ)`: particle
-/// `i`'s position for unknown `xᵢ`) takes triangles into colliders, those are held as well
-/// and the system solved again from the last answer (at most [`HOLD_ROUNDS`] times). `base`
-/// is what [`NormalHolds::settle`] takes. Counts each solve in `stats`. When the first solve
-/// fails, the holds are dropped and the system solved without them if `last_try`; otherwise
-/// the failure is returned with the holds kept, for the caller's next try (a projected
-/// matrix).
+/// A step's linear solve `a x = rhs` with particles and triangles' corners held along
+/// contact normals (Baraff and Witkin's filter, see [`NormalHolds`]), as an active set: the
+/// holds `hold_faces` found at the step's start; then, while the solve's trial end of the
+/// step (`end(i, xᵢ)`: particle `i`'s position for unknown `xᵢ`) takes triangles (and with
+/// `points`, particles) into colliders, or leaves a held particle's friction on the other
+/// side of its smoothing zone than it was linearized on
+/// ([`NormalHolds::relinearize_leavers`]: `a` and `rhs` change), those are held or
+/// linearized again and the system solved again from the last answer (at most
+/// [`HOLD_ROUNDS`] times). `base` is what [`NormalHolds::settle`] takes: the step's start
+/// velocities when the unknown is a change of velocity (then `base + x` is the end
+/// velocity), `None` when it is the end velocity (no friction is linearized then). Counts
+/// each solve in `stats`. When the first solve fails, the holds are dropped and the system
+/// solved without them if `last_try`; otherwise the failure is returned with the holds kept,
+/// for the caller's next try (a projected matrix).
 #[allow(clippy::too_many_arguments)]
 fn solve_holding(
     lin: &dyn Linearization,
@@ -219,14 +238,15 @@ fn solve_holding(
     mask: &[Scalar],
     holds: &mut NormalHolds,
     base: Option<&[Vector]>,
+    (a, rhs): (&mut SpringMatrix, &mut [Vector]),
     x: &mut [Vector],
     end: impl Fn(usize, Vector) -> Vector,
-    mut solve: impl FnMut(&[(u32, Matrix3)], &mut [Vector]) -> PcgReport,
-    last_try: bool,
+    mut solve: impl FnMut(&SpringMatrix, &[Vector], &[(u32, Matrix3)], &mut [Vector]) -> PcgReport,
+    (points, last_try): (bool, bool),
     stats: &mut IntegratorStats,
 ) -> PcgReport {
     holds.settle(base, x);
-    let mut report = solve(&holds.filters, x);
+    let mut report = solve(a, rhs, &holds.filters, x);
     stats.linear_solves += 1;
     stats.linear_iterations += report.iterations as u64;
     if report.failed && !last_try {
@@ -237,12 +257,13 @@ fn solve_holding(
         // non-positive curvature: solved without the holds instead, as before them (the
         // contact after the step still stops what goes in).
         holds.clear();
-        report = solve(&[], x);
+        report = solve(a, rhs, &[], x);
         stats.linear_solves += 1;
         stats.linear_iterations += report.iterations as u64;
     }
     let n = lin.particles().min(x.len());
-    let rounds = if lin.may_hold_faces(false) {
+    let trials = lin.may_hold_faces(points);
+    let rounds = if trials || base.is_some() && !holds.drag.is_empty() {
         HOLD_ROUNDS
     } else {
         0
@@ -251,16 +272,23 @@ fn solve_holding(
         if report.failed {
             break;
         }
-        holds.trial.clear();
-        holds.trial.extend((0..n).map(|i| end(i, x[i])));
-        if !lin.hold_faces_trial(t, h, ps, mask, false, holds) {
+        let mut again = false;
+        if trials {
+            holds.trial.clear();
+            holds.trial.extend((0..n).map(|i| end(i, x[i])));
+            again |= lin.hold_faces_trial(t, h, ps, mask, points, holds);
+        }
+        if let Some(v) = base {
+            again |= holds.relinearize_leavers(|i| v[i] + x[i], h, &mut a.diag, rhs);
+        }
+        if !again {
             break;
         }
         // A round that does not converge keeps the last answer.
         holds.kept.clear();
         holds.kept.extend_from_slice(&x[..n]);
         holds.settle(base, x);
-        let next = solve(&holds.filters, x);
+        let next = solve(a, rhs, &holds.filters, x);
         stats.linear_solves += 1;
         stats.linear_iterations += next.iterations as u64;
         if next.failed || !next.converged && report.converged {
@@ -298,9 +326,15 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
             v.resize(n, Vector::ZERO);
         }
         lin.total_forces(t, ps, &mut self.f0);
-        // Triangles resting on colliders, or that the step would take into them: their
-        // corners held along the normals inside the solve.
-        lin.hold_faces(t, h, ps, &self.f0, &self.mask, false, &mut self.holds);
+        self.holds.reserve_for(n);
+        // Particles and triangles resting on colliders, or that the step would take into
+        // them: held along the normals inside the solve. The particles' friction, pressed by
+        // the forces at the step's start, is linearized at the start's velocities as the
+        // damping is: its drag `F(v₀) + ∂F/∂v Δv` (the first Newton iteration of backward
+        // Euler's friction potential, Li et al. 2020, §5).
+        lin.hold_faces(t, h, ps, &self.f0, &self.mask, true, &mut self.holds);
+        let f0 = &self.f0;
+        self.holds.start_friction(|i| f0[i]);
         // Elements with a costly projection (tets): try their exact Hessians first, project
         // only if the matrix turns out indefinite.
         let lazy = self.definite && lin.has_costly_projection();
@@ -317,7 +351,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 // constrained particles): consecutive steps change velocity similarly.
                 self.dv[i] *= self.mask[i];
             }
-            let (solver, rhs, mask) = (&mut self.solver, &self.rhs, &self.mask);
+            // The friction's force at the start and its Jacobian join the system as the
+            // damping's do.
+            self.holds
+                .linearize_friction(&ps.v, h, &mut a.diag, &mut self.rhs);
+            let (solver, mask) = (&mut self.solver, &self.mask);
             let (x, v) = (&ps.x, &ps.v);
             self.last = solve_holding(
                 lin,
@@ -326,10 +364,11 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 mask,
                 &mut self.holds,
                 Some(v),
+                (a, &mut self.rhs),
                 &mut self.dv,
                 |i, dv| x[i] + (v[i] + dv) * (h * mask[i]),
-                |filters, dv| solver.solve_filtered(a, rhs, dv, mask, filters),
-                k + 1 == tries.len(),
+                |a, rhs, filters, dv| solver.solve_filtered(a, rhs, dv, mask, filters),
+                (true, k + 1 == tries.len()),
                 &mut self.stats,
             );
             if !self.last.failed {
@@ -344,9 +383,22 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 IntegratorKind::LinearlyImplicitEuler,
             ));
         }
-        for i in 0..n {
-            ps.v[i] += self.dv[i];
-            ps.x[i] += ps.v[i] * (h * self.mask[i]);
+        if self.holds.filters.is_empty() {
+            for i in 0..n {
+                ps.v[i] += self.dv[i];
+                ps.x[i] += ps.v[i] * (h * self.mask[i]);
+            }
+        } else {
+            // The holds' impacts lose velocity across the normals to Coulomb's friction, as
+            // in backward Euler (the contact after the step would have applied it).
+            self.kv.copy_from_slice(&ps.v[..n]);
+            for i in 0..n {
+                ps.v[i] += self.dv[i];
+            }
+            self.holds.impact_friction(&self.kv, &mut ps.v);
+            for i in 0..n {
+                ps.x[i] += ps.v[i] * (h * self.mask[i]);
+            }
         }
         self.stats.steps += 1;
         self.stats.evaluations += 1;
