@@ -59,8 +59,9 @@ pub struct ParticleModel {
     /// ([`Linearization::hold_faces`](crate::core::jacobian::Linearization::hold_faces)),
     /// instead of leaving them wholly to the contact after the step, which on a rod as wide
     /// as the cells left a cloth wedged (docs/BENCHMARKS.md, "holding triangles inside the
-    /// implicit solve"); backward Euler holds the particles resting on colliders too, with
-    /// friction in its minimization, so that a cloth at rest is in static equilibrium. On by
+    /// implicit solve"); backward Euler and linearly implicit Euler hold the particles
+    /// resting on colliders too, with Coulomb friction inside the solve, so that a cloth at
+    /// rest is in static equilibrium. On by
     /// default ([`ParticleModel::new`]); off, a run in contact costs less (the 64² cloth on a
     /// rod 1.0–1.6 times less, docs/BENCHMARKS.md) but may wedge.
     pub hold_faces: bool,

@@ -139,8 +139,9 @@ pub struct SoftBody {
     /// colliders that need its triangles (rods, small balls, box edges) along the contact
     /// normals inside the solve, so a cloth on a rod about as wide as its cells hangs on it
     /// instead of wedging ([`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces)).
-    /// Backward Euler also holds the particles resting on colliders, with Coulomb friction
-    /// inside its minimization, so that a body at rest on colliders is in static equilibrium.
+    /// Backward Euler and linearly implicit Euler also hold the particles resting on
+    /// colliders, with Coulomb friction inside the solve, so that a body at rest on colliders
+    /// is in static equilibrium.
     /// Default: on. Off, the triangles are left to the contact after the step alone, which
     /// costs less (the 64² cloth on a rod 1.0–1.6 times less) but may wedge the cloth.
     /// Explicit methods never hold them.
