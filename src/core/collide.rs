@@ -1937,6 +1937,12 @@ impl NormalHolds {
     /// (symmetric, negative semi-definite), as [`NormalHolds::start_friction`] gives them.
     fn friction_at(n: Vector, bound: Scalar, vp: Vector, v: Vector) -> (Vector, Matrix3) {
         let (u, x, p) = Self::sliding(n, vp, v);
+        Self::friction_of(u, x, p, bound)
+    }
+
+    /// [`NormalHolds::friction_at`] of a sliding `u` of length `x` already measured, with the
+    /// projector `p` across its normal ([`NormalHolds::sliding`]).
+    fn friction_of(u: Vector, x: Scalar, p: Matrix3, bound: Scalar) -> (Vector, Matrix3) {
         let (force, slope) = Self::friction_force(u, x, bound);
         let Some((f1, df1)) = slope else {
             return (force, p * (-2.0 * bound / Self::STATIC_SPEED));
@@ -1993,8 +1999,8 @@ impl NormalHolds {
         self.linearized.clear();
         for &(i, n, bound, vp) in &self.drag {
             let i = i as usize;
-            let (u, ..) = Self::sliding(n, vp, v0[i]);
-            let (force, jacobian) = Self::friction_at(n, bound, vp, v0[i]);
+            let (u, x, p) = Self::sliding(n, vp, v0[i]);
+            let (force, jacobian) = Self::friction_of(u, x, p, bound);
             rhs[i] += force * scale;
             diag[i] -= jacobian * scale;
             self.linearized.push((u, u, force, jacobian));
@@ -2037,7 +2043,7 @@ impl NormalHolds {
             let next = if xw >= eps * 1e-3 && u.dot(uw) < 0.0 {
                 (u0, Vector::ZERO, Vector::ZERO, p * (-bound / eps))
             } else if xw < eps && x > eps {
-                let (force, jacobian) = Self::friction_at(n, bound, vp, vel(i));
+                let (force, jacobian) = Self::friction_of(u, x, p, bound);
                 (u0, u, force, jacobian)
             } else {
                 continue;

@@ -60,7 +60,8 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// Euler's friction potential (Li et al. 2020, *Incremental Potential Contact*, §5). Holds
 /// whose solve left that linearization's side of the smoothing zone (a sliding the friction
 /// reversed, a rest the particle broke free of) have it linearized again and the system is
-/// solved once more ([`NormalHolds::relinearize_leavers`]). A cloth on a slope slides as
+/// solved again, in the rounds that also hold what the last solve took into colliders
+/// ([`NormalHolds::relinearize_leavers`]). A cloth on a slope slides as
 /// far as Coulomb's law says, and one draped on a sphere in frame-long steps comes to
 /// static equilibrium; with the contact left to after the step it came to rest with forces
 /// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
@@ -212,8 +213,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
     counters!();
 }
 
-/// Rounds of [`solve_holding`] after its first solve, each adding the triangles the last
-/// trial took into colliders.
+/// Rounds of [`solve_holding`] after its first solve, each adding the particles and
+/// triangles the last trial took into colliders and linearizing again the friction of the
+/// holds it left on the other side of the smoothing zone.
 const HOLD_ROUNDS: u32 = 3;
 
 /// A step's linear solve `a x = rhs` with particles and triangles' corners held along
