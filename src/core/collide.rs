@@ -610,12 +610,14 @@ impl Collider {
 
     /// Particles resting on or pressed into this collider at time `t`: touching (within the
     /// thickness plus `slack`), not moving away, and pushed into it by `f` (their total force).
-    /// Implicit steps hold them still (Baraff & Witkin's constraint filter: sticking contact)
-    /// instead of letting the step drive them in and projecting them out afterwards, which
-    /// pumps energy into stiff elements. Marks them in `held` and sets their velocity to the
-    /// collider's surface velocity. A collider with a [`Response`] holds nothing: the
-    /// constraint force of a held particle would never reach its body, so its contacts are
-    /// resolved after the step like an explicit method's, where the impulse is exchanged.
+    /// Implicit steps that hold no particles along the contact normals hold these still
+    /// (Baraff & Witkin's constraint filter: sticking contact) instead of letting the step
+    /// drive them in and projecting them out afterwards, which pumps energy into stiff
+    /// elements. Sets their `mask` to 0 and their velocity to the collider's surface velocity;
+    /// particles with `mask` 0 already are left alone. A collider with a [`Response`] holds
+    /// nothing: the constraint force of a held particle would never reach its body, so its
+    /// contacts are resolved after the step like an explicit method's, where the impulse is
+    /// exchanged.
     #[allow(clippy::too_many_arguments)]
     pub fn hold(
         &self,
@@ -625,21 +627,27 @@ impl Collider {
         v: &mut [Vector],
         f: &[Vector],
         inv_mass: &[Scalar],
-        held: &mut [bool],
+        mask: &mut [Scalar],
     ) {
         if self.response.is_some() {
             return;
         }
         let pose = self.pose(t);
         let thick = self.material.thickness as Scalar + slack;
-        for i in 0..x.len() {
-            if inv_mass[i] == 0.0 || held[i] {
+        let n = x
+            .len()
+            .min(v.len())
+            .min(f.len())
+            .min(inv_mass.len())
+            .min(mask.len());
+        for i in 0..n {
+            if inv_mass[i] == 0.0 || mask[i] == 0.0 {
                 continue;
             }
-            if let Some((_, n)) = self.contact(&pose, thick, x[i]) {
+            if let Some((_, nrm)) = self.contact(&pose, thick, x[i]) {
                 let vc = Self::surface_velocity(&pose, x[i]);
-                if (v[i] - vc).dot(n) <= 0.0 && f[i].dot(n) <= 0.0 {
-                    held[i] = true;
+                if (v[i] - vc).dot(nrm) <= 0.0 && f[i].dot(nrm) <= 0.0 {
+                    mask[i] = 0.0;
                     v[i] = vc;
                 }
             }
@@ -693,7 +701,7 @@ impl Collider {
             // Approaching faster than the thickness a step: the contact after the step knows
             // the side it came from (its swept test); should the step take it in, the trial
             // holds it. Sliding along the surface, at any speed, it is held.
-            if -vn * h > material {
+            if -vn * h > material.max(ROUND_OFF_SLACK) {
                 continue;
             }
             // The distance from the collider's surface: `at` lies `thick` out along `nrm`.
@@ -701,7 +709,7 @@ impl Collider {
             let allowed = -(dist - material).max(0.0) / h;
             // Not moving away (by more than a hundredth of the thickness over the step: a
             // particle the last step held moves along the surface with round-off across it).
-            if vn * h <= 0.01 * material && f[i].dot(nrm) <= 0.0 {
+            if vn * h <= (0.01 * material).max(ROUND_OFF_SLACK) && f[i].dot(nrm) <= 0.0 {
                 out.push((i as u32, nrm, vc + nrm * vn.clamp(allowed, 0.0), mu));
             }
         }
@@ -769,10 +777,13 @@ impl Collider {
     /// normal and is pushed towards it by `f` (its total force) is held along that normal for
     /// the step (Baraff and Witkin's constraint filter with one constrained direction: the
     /// corner stays free to slide and to be pulled across). Pushes each such corner, the
-    /// normal and the surface's velocity at the contact onto `out`; the caller turns them
-    /// into filters ([`NormalHolds::settle`]). Particles with `mask` zero (pinned, or already
-    /// held whole) are left out. A collider with a [`Response`] holds nothing, as in
-    /// [`Collider::hold`]: its body would never feel the constraint's force.
+    /// normal, the surface's velocity at the contact and the collider's friction coefficient
+    /// onto `out`; the caller turns them into filters ([`NormalHolds::settle`]), and the
+    /// implicit steps give each corner Coulomb's friction once
+    /// ([`NormalHolds::one_friction_per_particle`], [`NormalHolds::start_friction`]).
+    /// Particles with `mask` zero (pinned, or already held whole) are left out. A collider
+    /// with a [`Response`] holds nothing, as in [`Collider::hold`]: its body would never feel
+    /// the constraint's force.
     ///
     /// An implicit step that instead let its springs pull a cloth's corners round a rod
     /// about as wide as its cells, and pushed the triangles back out after the step, did
@@ -797,6 +808,7 @@ impl Collider {
         }
         let pose = self.pose(t);
         let thick = self.material.thickness as Scalar + slack;
+        let mu = self.material.friction as Scalar;
         let n = x
             .len()
             .min(v.len())
@@ -818,7 +830,7 @@ impl Collider {
             for i in ids {
                 let vn = (v[i] - vc).dot(nrm);
                 if inv_mass[i] != 0.0 && mask[i] != 0.0 && vn <= 0.0 && f[i].dot(nrm) <= 0.0 {
-                    out.push((i as u32, nrm, vc + nrm * vn.max(allowed), 0.0));
+                    out.push((i as u32, nrm, vc + nrm * vn.max(allowed), mu));
                 }
             }
         }
@@ -851,6 +863,7 @@ impl Collider {
         }
         let (start, end) = (self.pose(t), self.pose(t + h));
         let thick = self.material.thickness as Scalar;
+        let mu = self.material.friction as Scalar;
         let shape_start = Pose3::from_parts(start.origin.to_f32(), start.rotation);
         let n = x0
             .len()
@@ -878,7 +891,7 @@ impl Collider {
             for i in ids {
                 let vi = (trial[i] - x0[i]) / h;
                 if inv_mass[i] != 0.0 && mask[i] != 0.0 && (vi - vc).dot(nrm) < allowed {
-                    out.push((i as u32, nrm, vc + nrm * allowed, 0.0));
+                    out.push((i as u32, nrm, vc + nrm * allowed, mu));
                 }
             }
         }
@@ -1808,6 +1821,12 @@ fn closest_on_segments(
 /// against it (m): see [`Collider::resolve_faces`].
 const FAR_FEATURE: Scalar = 1e4;
 
+/// 1 µm: how far round-off can leave a particle that the contact put on a collider's surface
+/// (positions of metres carry 0.1 µm of it in `f32`), and the least slack of the implicit
+/// steps' holds — on a collider without thickness a particle resting on its surface lies on
+/// it only to round-off, and would otherwise be missed as often as found.
+pub const ROUND_OFF_SLACK: Scalar = 1e-6;
+
 /// How many times as far as a feature's contact point one of its corners may be pushed (see
 /// [`Collider::resolve_faces`]).
 const LEVER: Scalar = 2.0;
@@ -1853,6 +1872,11 @@ pub struct NormalHolds {
     pub trial: Vec<Vector>,
     /// The last round's answer, kept while the next is solved (scratch).
     pub kept: Vec<Vector>,
+    /// Whether the triangles' holds carry their collider's friction (one per corner,
+    /// [`NormalHolds::one_friction_per_particle`]) or are frictionless; the particles' own
+    /// holds carry it either way. Linearly implicit Euler sets it; backward Euler leaves it
+    /// off (docs/BENCHMARKS.md, "tet bodies slide on colliders").
+    pub face_friction: bool,
 }
 
 impl NormalHolds {
@@ -2082,6 +2106,38 @@ impl NormalHolds {
         }
     }
 
+    /// Leaves one friction coefficient per particle among the holds `raw[from..]` (those one
+    /// collider pushed): the others' are set to zero. A particle that is the corner of
+    /// several triangles resting on the collider, or rests on it itself as well, gets a hold
+    /// for each, but touches the collider once, and [`NormalHolds::start_friction`] would
+    /// give it Coulomb's force once a hold. The holds are sorted by particle, then by normal
+    /// (as [`NormalHolds::settle`] sorts them): the friction is the first normal's, whatever
+    /// order the triangles came in.
+    pub fn one_friction_per_particle(&mut self, from: usize) {
+        let Some(raw) = self.raw.get_mut(from..) else {
+            return;
+        };
+        raw.sort_unstable_by(|a, b| Self::order(a).cmp(&Self::order(b)));
+        let mut last = None;
+        for h in raw {
+            if last == Some(h.0) {
+                h.3 = 0.0;
+            } else {
+                last = Some(h.0);
+            }
+        }
+    }
+
+    /// The order of [`NormalHolds::settle`]: by particle, then by normal (bitwise), then by
+    /// friction coefficient.
+    fn order(h: &(u32, Vector, Vector, Scalar)) -> (u32, [u64; 3], u64) {
+        (
+            h.0,
+            h.1.to_array().map(|c| c.to_bits() as u64),
+            h.3.to_bits() as u64,
+        )
+    }
+
     /// Turns [`NormalHolds::raw`] into [`NormalHolds::filters`] and writes each held
     /// particle's prescribed part into a solve's starting guess `x`, which the filtered
     /// solve keeps: each particle's normals made orthonormal (Gram–Schmidt, in a fixed
@@ -2093,12 +2149,8 @@ impl NormalHolds {
         self.contact.clear();
         // By particle, then by normal: the same list gives the same filters, whatever order
         // the colliders and faces pushed them in.
-        self.raw.sort_unstable_by(|a, b| {
-            let key = |h: &(u32, Vector, Vector, Scalar)| {
-                (h.0, h.1.to_array().map(|c| c.to_bits()), h.3.to_bits())
-            };
-            key(a).cmp(&key(b))
-        });
+        self.raw
+            .sort_unstable_by(|a, b| Self::order(a).cmp(&Self::order(b)));
         let mut k = 0;
         while k < self.raw.len() {
             let (i, first, vp, _) = self.raw[k];

@@ -10,7 +10,7 @@
 //!   implicit steps leave it out, as Baraff & Witkin do (it is still exact here for tests);
 //! - drag and wind: `∂f_i/∂v_i = −c I`.
 
-use crate::core::collide::NormalHolds;
+use crate::core::collide::{NormalHolds, ROUND_OFF_SLACK};
 use crate::core::forces::PackedSpring;
 use crate::core::ode::ParticleState;
 use crate::core::particles::ParticleModel;
@@ -162,14 +162,12 @@ impl ParticleModel {
     }
 
     /// Off-diagonal structure of implicit matrices: each spring, then each tet edge.
-    fn matrix_pairs(&self) -> impl ExactSizeIterator<Item = (u32, u32)> + '_ {
+    fn matrix_pairs(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
         self.springs
             .as_slice()
             .iter()
             .map(|s| (s.i, s.j))
             .chain(self.tets.edges().iter().copied())
-            .collect::<Vec<_>>()
-            .into_iter()
     }
 
     /// Adds `scale K_tets(x)` (and, with `product`, `kv −= K_tets v`) into the tet part of `a`
@@ -283,11 +281,19 @@ pub trait Linearization: Sync {
     fn drag_coefficient(&self) -> Scalar {
         0.0
     }
-    /// Holds particles resting on or pressed into colliders for the coming implicit step
-    /// (their `mask` set to 0 and velocity to the collider's): contact as a constraint of the
-    /// solve. The default holds none.
-    fn hold_contacts(&self, t: Scalar, state: &mut ParticleState, mask: &mut [Scalar]) {
-        let _ = (t, state, mask);
+    /// Holds particles resting on or pressed into colliders still for the coming implicit
+    /// step (their `mask` set to 0 and velocity to the collider's): sticking contact as a
+    /// constraint of the solve, for steps that hold no particles along the contact normals
+    /// ([`Linearization::hold_faces`] with `points`). `scratch` takes the forces (resized to
+    /// the particles, so a step reusing it allocates nothing). The default holds none.
+    fn hold_contacts(
+        &self,
+        t: Scalar,
+        state: &mut ParticleState,
+        mask: &mut [Scalar],
+        scratch: &mut Vec<Vector>,
+    ) {
+        let _ = (t, state, mask, scratch);
     }
     /// Holds the corners of triangles resting on colliders along the contact normals for
     /// the step of length `h` from `t`
@@ -507,32 +513,32 @@ impl Linearization for ParticleModel {
         !self.tets.is_empty()
     }
 
-    /// Finite-element bodies hold their contacts (see [`Collider::hold`](crate::core::collide::Collider::hold)); spring bodies keep
-    /// the post-step projection alone, as before.
-    fn hold_contacts(&self, t: Scalar, state: &mut ParticleState, mask: &mut [Scalar]) {
+    /// Finite-element bodies hold their contacts still (see
+    /// [`Collider::hold`](crate::core::collide::Collider::hold)); spring bodies keep the
+    /// post-step projection alone, as before.
+    fn hold_contacts(
+        &self,
+        t: Scalar,
+        state: &mut ParticleState,
+        mask: &mut [Scalar],
+        scratch: &mut Vec<Vector>,
+    ) {
         if self.tets.is_empty() || self.colliders.is_empty() {
             return;
         }
-        let n = self.len();
-        let mut f = vec![Vector::ZERO; n];
-        self.total_forces(t, state, &mut f);
-        let mut held = vec![false; n];
-        // 1 µm of slack: a particle projected onto the surface last step is touching it.
+        scratch.resize(self.len(), Vector::ZERO);
+        self.total_forces(t, state, scratch);
+        // A particle projected onto the surface last step is touching it.
         for c in &self.colliders {
             c.hold(
                 t,
-                1e-6,
+                ROUND_OFF_SLACK,
                 &state.x,
                 &mut state.v,
-                &f,
+                scratch,
                 self.inv_mass(),
-                &mut held,
+                mask,
             );
-        }
-        for (m, h) in mask.iter_mut().zip(&held) {
-            if *h {
-                *m = 0.0;
-            }
         }
     }
 
@@ -553,8 +559,10 @@ impl Linearization for ParticleModel {
         for c in &self.colliders {
             // A fiftieth of the thickness of slack: a triangle whose corners the last step
             // held at the thickness is resting on the collider, though its nearest point may
-            // have come out a little (each corner is held along one normal).
-            let slack = 0.02 * c.material.thickness as Scalar;
+            // have come out a little (each corner is held along one normal). On a collider
+            // without thickness, the round-off of a particle the contact put on its surface.
+            let slack = (0.02 * c.material.thickness as Scalar).max(ROUND_OFF_SLACK);
+            let from = holds.raw.len();
             if points {
                 c.hold_points(
                     t,
@@ -568,6 +576,7 @@ impl Linearization for ParticleModel {
                     &mut holds.raw,
                 );
             }
+            let faces_from = holds.raw.len();
             c.hold_faces(
                 t,
                 h,
@@ -581,6 +590,16 @@ impl Linearization for ParticleModel {
                 mask,
                 &mut holds.raw,
             );
+            // A corner of several triangles on this collider, or a particle resting on it
+            // that is also a corner, touches it once: one friction. (The particles' own
+            // holds are one a particle.)
+            if !holds.face_friction {
+                for r in &mut holds.raw[faces_from..] {
+                    r.3 = 0.0;
+                }
+            } else if holds.raw.len() > faces_from {
+                holds.one_friction_per_particle(from);
+            }
         }
     }
 
@@ -613,6 +632,7 @@ impl Linearization for ParticleModel {
                     &mut holds.raw,
                 );
             }
+            let faces_from = holds.raw.len();
             added += c.hold_faces_trial(
                 t,
                 h,
@@ -624,6 +644,11 @@ impl Linearization for ParticleModel {
                 mask,
                 &mut holds.raw,
             );
+            if !holds.face_friction {
+                for r in &mut holds.raw[faces_from..] {
+                    r.3 = 0.0;
+                }
+            }
         }
         added > 0
     }

@@ -59,9 +59,13 @@ pub struct ParticleModel {
     /// ([`Linearization::hold_faces`](crate::core::jacobian::Linearization::hold_faces)),
     /// instead of leaving them wholly to the contact after the step, which on a rod as wide
     /// as the cells left a cloth wedged (docs/BENCHMARKS.md, "holding triangles inside the
-    /// implicit solve"); backward Euler and linearly implicit Euler hold the particles
+    /// implicit solve"); backward Euler and linearly implicit Euler hold a cloth's particles
     /// resting on colliders too, with Coulomb friction inside the solve, so that a cloth at
-    /// rest is in static equilibrium. On by
+    /// rest is in static equilibrium. Linearly implicit Euler holds a tet body's particles so
+    /// as well, and gives the triangles' corners it holds their collider's friction, so that
+    /// a body on a slope slides as Coulomb's law says; otherwise (backward Euler, the
+    /// trapezoid, or with this off) a tet body's particles pressed on colliders are held
+    /// still ([`Linearization::hold_contacts`](crate::core::jacobian::Linearization::hold_contacts)). On by
     /// default ([`ParticleModel::new`]); off, a run in contact costs less (the 64² cloth on a
     /// rod 1.0–1.6 times less, docs/BENCHMARKS.md) but may wedge.
     pub hold_faces: bool,

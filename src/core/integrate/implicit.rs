@@ -10,7 +10,10 @@ use crate::math::{Matrix3, Scalar, Vector};
 /// What every implicit step starts with: the step size checked, the system's linearization
 /// and the state's particles found (or the error saying which is missing), the matrix rebuilt
 /// when the system's structure changed, and the free-particle mask filled (a free particle
-/// without a valid mass is a reported solver failure).
+/// without a valid mass is a reported solver failure). A step that holds particles on
+/// colliders along the contact normals (`points`, where the system holds any) leaves them to
+/// those holds; otherwise the particles pressed into colliders are held still
+/// ([`Linearization::hold_contacts`], its forces in `scratch`).
 #[allow(clippy::too_many_arguments)]
 fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     kind: IntegratorKind,
@@ -20,6 +23,7 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     state: &'a mut S,
     slot: &'a mut Option<SpringMatrix>,
     mask: &mut Vec<Scalar>,
+    (points, scratch): (bool, &mut Vec<Vector>),
 ) -> Result<
     (
         &'a dyn Linearization,
@@ -41,7 +45,9 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     if !lin.free_mask(mask) {
         return Err(StepError::SolverFailed(kind));
     }
-    lin.hold_contacts(t, ps, mask);
+    if !(points && lin.may_hold_faces(true)) {
+        lin.hold_contacts(t, ps, mask, scratch);
+    }
     Ok((lin, ps, a))
 }
 
@@ -54,9 +60,10 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 ///
 /// With [`ParticleModel::hold_faces`](crate::core::particles::ParticleModel::hold_faces), the
 /// particles and triangles' corners resting on colliders, or that the solve takes into them,
-/// are held along the contact normals inside the solve ([`NormalHolds`]), and the particles'
-/// Coulomb friction (pressed by the forces at the step's start) joins the system linearized
-/// at the start's velocities, as the damping does: the first Newton iteration of backward
+/// are held along the contact normals inside the solve ([`NormalHolds`]) — a cloth's and a
+/// tet body's alike — and their Coulomb friction (pressed by the forces at the step's start;
+/// once for a corner of several triangles on a collider) joins the system linearized at the
+/// start's velocities, as the damping does: the first Newton iteration of backward
 /// Euler's friction potential (Li et al. 2020, *Incremental Potential Contact*, §5). Holds
 /// whose solve left that linearization's side of the smoothing zone (a sliding the friction
 /// reversed, a rest the particle broke free of) have it linearized again and the system is
@@ -162,6 +169,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             state,
             &mut self.a,
             &mut self.mask,
+            (false, &mut self.f),
         )?;
         let n = lin.particles();
         for v in [&mut self.f, &mut self.rhs, &mut self.v1] {
@@ -322,6 +330,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
             state,
             &mut self.a,
             &mut self.mask,
+            (true, &mut self.f0),
         )?;
         let n = lin.particles();
         for v in [&mut self.f0, &mut self.kv, &mut self.rhs, &mut self.dv] {
@@ -329,6 +338,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         lin.total_forces(t, ps, &mut self.f0);
         self.holds.reserve_for(n);
+        self.holds.face_friction = true;
         // Particles and triangles resting on colliders, or that the step would take into
         // them: held along the normals inside the solve. The particles' friction, pressed by
         // the forces at the step's start, is linearized at the start's velocities as the
@@ -456,7 +466,11 @@ pub struct NewtonReport {
 /// Potential Contact*, §5: the normal force and the normal lagged from the step's start,
 /// smoothed below [`NormalHolds::STATIC_SPEED`]), so a cloth resting on colliders comes to
 /// static equilibrium; with the contact left to after the step it came to a standstill with
-/// forces of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
+/// forces of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md). A tet
+/// body's particles pressed on colliders are held still instead, and the triangles' holds
+/// are frictionless: with Coulomb friction there, a tet slab's impact on a rod kept the
+/// Newton iteration from converging within its cap, and the iterate it stopped at threw
+/// the slab along the rod at 0.5 m/s (docs/BENCHMARKS.md, "tet bodies slide on colliders").
 #[derive(Clone, Debug)]
 pub struct BackwardEuler {
     /// Iteration cap per step (with [`BackwardEuler::reuse_factorization`], the cap on
@@ -622,7 +636,16 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for BackwardEul
         state: &mut S,
     ) -> Result<Scalar, StepError> {
         let kind = IntegratorKind::BackwardEuler;
-        let (lin, ps, a) = implicit_setup(kind, sys, t, h, state, &mut self.a, &mut self.mask)?;
+        let (lin, ps, a) = implicit_setup(
+            kind,
+            sys,
+            t,
+            h,
+            state,
+            &mut self.a,
+            &mut self.mask,
+            (false, &mut self.vt),
+        )?;
         let n = lin.particles();
         for b in [
             &mut self.x0,
