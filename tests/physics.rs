@@ -437,7 +437,10 @@ fn ground_bounce_reaches_e_squared_height() {
 /// error and the smoothed start from rest leave the slide within `2 a h t` of Coulomb's;
 /// resting, the cloth creeps at most 1 mm/s (`NormalHolds::STATIC_SPEED`) times `t`. With the
 /// contact left to after the step, backward Euler slid 23 % too far at μ = 0.5 and 8.2 cm
-/// where it should stay at μ = 0.7.
+/// where it should stay at μ = 0.7. The same on a plane without thickness (as
+/// `build::ground`'s), where the holds missed the particles that lay on it only to
+/// round-off: it slid 2.33–2.43 m whatever μ (2.45 m without friction); now 1.198, 0.334
+/// and 0.0006 m.
 #[test]
 fn backward_euler_slides_and_sticks_on_a_slope_as_coulomb_says() {
     slides_and_sticks_as_coulomb_says(IntegratorKind::BackwardEuler);
@@ -452,18 +455,25 @@ fn backward_euler_slides_and_sticks_on_a_slope_as_coulomb_says() {
 /// against 0.329 m at μ = 0.5, 0.6 mm at μ = 0.7, as backward Euler. With the contact left
 /// to after the step it slid 5 % and 23 % too far, and 8.2 cm where it should stay; with
 /// the friction linearized at the start alone, a step late from rest (1.128 and 0.304 m).
+/// On the plane without thickness it slid 2.35–2.42 m whatever μ; now as on the other.
 #[test]
 fn linearly_implicit_euler_slides_and_sticks_on_a_slope_as_coulomb_says() {
     slides_and_sticks_as_coulomb_says(IntegratorKind::LinearlyImplicitEuler);
 }
 
-/// The slope scene under `integrator`.
+/// The slope scene under `integrator`, on a plane with the contact thickness and on one
+/// without.
 fn slides_and_sticks_as_coulomb_says(integrator: IntegratorKind) {
-    let (theta, thick, t) = (30f64.to_radians(), 0.005, 1.0);
+    let (theta, t) = (30f64.to_radians(), 1.0);
     let h = 1.0 / 60.0;
     let n = [theta.sin(), theta.cos(), 0.0];
     let down = [theta.cos(), -theta.sin(), 0.0];
-    for mu in [0.3, 0.5, 0.7] {
+    // A plane with the contact thickness, and one without (as `build::ground`'s), whose
+    // resting particles lie on it only to round-off.
+    for (thick, mu) in [0.005, 0.0]
+        .into_iter()
+        .flat_map(|d| [(d, 0.3), (d, 0.5), (d, 0.7)])
+    {
         let mut s = build::cloth(&build::ClothParams {
             rows: 5,
             cols: 5,
@@ -527,16 +537,21 @@ fn slides_and_sticks_as_coulomb_says(integrator: IntegratorKind) {
             (0.0, NormalHolds::STATIC_SPEED as f64 * t)
         };
         println!(
-            "{integrator:?}, μ = {mu}: slid {:.4} m, Coulomb {coulomb:.4} m (within {tol:.4}), \
-             off the plane by {:.3} mm",
+            "{integrator:?}, thickness {thick} m, μ = {mu}: slid {:.4} m, Coulomb {coulomb:.4} m \
+             (within {tol:.4}), off the plane by {:.4} mm",
             slid,
             off * 1e3
         );
         assert!(
             (slid - coulomb).abs() <= tol,
-            "μ = {mu}: slid {slid} m where Coulomb's law slides {coulomb} m"
+            "thickness {thick} m, μ = {mu}: slid {slid} m where Coulomb's law slides {coulomb} m"
         );
-        assert!(off <= 0.01 * thick, "μ = {mu}: {off} m off the thickness");
+        // A hundredth of the thickness, or the holds' round-off slack (1 µm) without one.
+        let slack = bevy_soft_body::core::collide::ROUND_OFF_SLACK as f64;
+        assert!(
+            off <= (0.01 * thick).max(slack),
+            "thickness {thick} m, μ = {mu}: {off} m off the thickness"
+        );
     }
 }
 
