@@ -778,9 +778,9 @@ impl Collider {
     /// the step (Baraff and Witkin's constraint filter with one constrained direction: the
     /// corner stays free to slide and to be pulled across). Pushes each such corner, the
     /// normal, the surface's velocity at the contact and the collider's friction coefficient
-    /// onto `out`; the caller turns them into filters ([`NormalHolds::settle`]), and the
-    /// implicit steps give each corner Coulomb's friction once
-    /// ([`NormalHolds::one_friction_per_particle`], [`NormalHolds::start_friction`]).
+    /// onto `out`; the caller turns them into filters ([`NormalHolds::settle`]), and gives
+    /// each corner Coulomb's friction once where its step takes the triangles' friction
+    /// ([`NormalHolds::face_friction`], [`NormalHolds::one_friction_per_particle`]).
     /// Particles with `mask` zero (pinned, or already held whole) are left out. A collider
     /// with a [`Response`] holds nothing, as in [`Collider::hold`]: its body would never feel
     /// the constraint's force.
