@@ -1063,7 +1063,6 @@ fn a_bunny_dropped_on_the_ground_lands_without_inverting_and_settles() {
 /// 0.34–0.35 m with either in steps of 1/1200–1/4800 s, where the block also bounces).
 #[test]
 fn a_tet_block_slides_and_sticks_on_a_slope_as_coulomb_says() {
-    use bevy_soft_body::core::collide::NormalHolds;
     use bevy_soft_body::prelude::*;
     let (theta, t, h) = (30f64.to_radians(), 1.0, 1.0 / 60.0);
     let n = [theta.sin(), theta.cos(), 0.0];
@@ -1135,12 +1134,7 @@ fn a_tet_block_slides_and_sticks_on_a_slope_as_coulomb_says() {
                 .zip(&start)
                 .map(|(x, x0)| ((x.x - x0.x) as f64 * down[0] + (x.y - x0.y) as f64 * down[1]) / k)
                 .sum();
-            let a = build::G * (theta.sin() - mu * theta.cos());
-            let (coulomb, tol) = if a > 0.0 {
-                (0.5 * a * t * t, 2.0 * a * h * t)
-            } else {
-                (0.0, NormalHolds::STATIC_SPEED as f64 * t)
-            };
+            let (coulomb, tol) = common::coulomb_slide(theta, mu, t, h);
             println!(
                 "{kind} ({solver:?}), thickness {thick} m, μ = {mu}: slid {slid:.4} m, \
                  Coulomb {coulomb:.4} m (within {tol:.4}), lowest particle {:.4} mm from the plane",

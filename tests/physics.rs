@@ -7,10 +7,11 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
-use bevy_soft_body::core::collide::NormalHolds;
 use bevy_soft_body::core::integrate::{AdaptiveConfig, Integrator};
 use bevy_soft_body::core::scene::{ParticleDesc, SpringDesc};
 use bevy_soft_body::prelude::*;
+
+mod common;
 
 const F64: bool = cfg!(feature = "f64");
 
@@ -530,12 +531,7 @@ fn slides_and_sticks_as_coulomb_says(integrator: IntegratorKind) {
             slid += ((x[0] - x0[0]) * down[0] + (x[1] - x0[1]) * down[1]) / k;
             off = off.max((x[0] * n[0] + x[1] * n[1] - thick).abs());
         }
-        let a = build::G * (theta.sin() - mu * theta.cos());
-        let (coulomb, tol) = if a > 0.0 {
-            (0.5 * a * t * t, 2.0 * a * h * t)
-        } else {
-            (0.0, NormalHolds::STATIC_SPEED as f64 * t)
-        };
+        let (coulomb, tol) = common::coulomb_slide(theta, mu, t, h);
         println!(
             "{integrator:?}, thickness {thick} m, μ = {mu}: slid {:.4} m, Coulomb {coulomb:.4} m \
              (within {tol:.4}), off the plane by {:.4} mm",

@@ -610,14 +610,14 @@ impl Collider {
 
     /// Particles resting on or pressed into this collider at time `t`: touching (within the
     /// thickness plus `slack`), not moving away, and pushed into it by `f` (their total force).
-    /// Implicit steps that hold no particles along the contact normals hold these still
-    /// (Baraff & Witkin's constraint filter: sticking contact) instead of letting the step
-    /// drive them in and projecting them out afterwards, which pumps energy into stiff
-    /// elements. Sets their `mask` to 0 and their velocity to the collider's surface velocity;
-    /// particles with `mask` 0 already are left alone. A collider with a [`Response`] holds
-    /// nothing: the constraint force of a held particle would never reach its body, so its
-    /// contacts are resolved after the step like an explicit method's, where the impulse is
-    /// exchanged.
+    /// Implicit steps that do not hold them along the contact normals with friction hold
+    /// them still (Baraff & Witkin's constraint filter: sticking contact) instead of letting
+    /// the step drive them in and projecting them out afterwards, which pumps energy into
+    /// stiff elements. Sets their `mask` to 0 and their velocity to the collider's surface
+    /// velocity; particles with `mask` 0 already are left alone. A collider with a
+    /// [`Response`] holds nothing: the constraint force of a held particle would never reach
+    /// its body, so its contacts are resolved after the step like an explicit method's, where
+    /// the impulse is exchanged.
     #[allow(clippy::too_many_arguments)]
     pub fn hold(
         &self,
@@ -2102,6 +2102,19 @@ impl NormalHolds {
             let ul = u.length();
             if ul > 0.0 {
                 v[i] -= u * (mu * dvn / ul).min(1.0);
+            }
+        }
+    }
+
+    /// The triangles' holds `raw[from..]` keep their collider's friction only where the step
+    /// gives triangles friction ([`NormalHolds::face_friction`]); otherwise it is set to zero.
+    pub fn face_friction_from(&mut self, from: usize) {
+        if self.face_friction {
+            return;
+        }
+        if let Some(raw) = self.raw.get_mut(from..) {
+            for h in raw {
+                h.3 = 0.0;
             }
         }
     }

@@ -283,9 +283,10 @@ pub trait Linearization: Sync {
     }
     /// Holds particles resting on or pressed into colliders still for the coming implicit
     /// step (their `mask` set to 0 and velocity to the collider's): sticking contact as a
-    /// constraint of the solve, for steps that hold no particles along the contact normals
-    /// ([`Linearization::hold_faces`] with `points`). `scratch` takes the forces (resized to
-    /// the particles, so a step reusing it allocates nothing). The default holds none.
+    /// constraint of the solve, for steps that do not hold them along the contact normals
+    /// with friction ([`Linearization::hold_faces`] with `points`: linearly implicit Euler
+    /// does, for a tet body's as for a cloth's). `scratch` takes the forces (resized to the
+    /// particles, so a step reusing it allocates nothing). The default holds none.
     fn hold_contacts(
         &self,
         t: Scalar,
@@ -590,14 +591,11 @@ impl Linearization for ParticleModel {
                 mask,
                 &mut holds.raw,
             );
+            holds.face_friction_from(faces_from);
             // A corner of several triangles on this collider, or a particle resting on it
             // that is also a corner, touches it once: one friction. (The particles' own
             // holds are one a particle.)
-            if !holds.face_friction {
-                for r in &mut holds.raw[faces_from..] {
-                    r.3 = 0.0;
-                }
-            } else if holds.raw.len() > faces_from {
+            if holds.face_friction && holds.raw.len() > faces_from {
                 holds.one_friction_per_particle(from);
             }
         }
@@ -644,11 +642,7 @@ impl Linearization for ParticleModel {
                 mask,
                 &mut holds.raw,
             );
-            if !holds.face_friction {
-                for r in &mut holds.raw[faces_from..] {
-                    r.3 = 0.0;
-                }
-            }
+            holds.face_friction_from(faces_from);
         }
         added > 0
     }

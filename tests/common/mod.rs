@@ -215,3 +215,20 @@ mod plugin {
             .unwrap()
     }
 }
+
+/// Coulomb's law for a body let go at rest on an incline of angle `theta` (radians) with
+/// friction `mu`: how far it slides in `t` seconds, `½ g (sin θ − μ cos θ) t²` (none where
+/// `μ ≥ tan θ`), and how close frame-long steps of `h` should come: within `2 a h t` (the
+/// step's first-order error and the smoothed start from rest), or, resting, the creep of
+/// `NormalHolds::STATIC_SPEED` (1 mm/s) times `t`.
+// The cast is a no-op in the `f64` build and needed in the `f32` one.
+#[allow(clippy::unnecessary_cast)]
+pub fn coulomb_slide(theta: f64, mu: f64, t: f64, h: f64) -> (f64, f64) {
+    let a = bevy_soft_body::core::build::G * (theta.sin() - mu * theta.cos());
+    if a > 0.0 {
+        (0.5 * a * t * t, 2.0 * a * h * t)
+    } else {
+        let creep = bevy_soft_body::core::collide::NormalHolds::STATIC_SPEED as f64;
+        (0.0, creep * t)
+    }
+}

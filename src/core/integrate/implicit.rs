@@ -10,10 +10,10 @@ use crate::math::{Matrix3, Scalar, Vector};
 /// What every implicit step starts with: the step size checked, the system's linearization
 /// and the state's particles found (or the error saying which is missing), the matrix rebuilt
 /// when the system's structure changed, and the free-particle mask filled (a free particle
-/// without a valid mass is a reported solver failure). A step that holds particles on
-/// colliders along the contact normals (`points`, where the system holds any) leaves them to
-/// those holds; otherwise the particles pressed into colliders are held still
-/// ([`Linearization::hold_contacts`], its forces in `scratch`).
+/// without a valid mass is a reported solver failure). A step that holds a tet body's
+/// particles on colliders along the contact normals with friction (`friction_holds`, where
+/// the system holds any) leaves them to those holds; otherwise the particles pressed into
+/// colliders are held still ([`Linearization::hold_contacts`], its forces in `scratch`).
 #[allow(clippy::too_many_arguments)]
 fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     kind: IntegratorKind,
@@ -23,7 +23,7 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     state: &'a mut S,
     slot: &'a mut Option<SpringMatrix>,
     mask: &mut Vec<Scalar>,
-    (points, scratch): (bool, &mut Vec<Vector>),
+    (friction_holds, scratch): (bool, &mut Vec<Vector>),
 ) -> Result<
     (
         &'a dyn Linearization,
@@ -45,7 +45,7 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
     if !lin.free_mask(mask) {
         return Err(StepError::SolverFailed(kind));
     }
-    if !(points && lin.may_hold_faces(true)) {
+    if !(friction_holds && lin.may_hold_faces(true)) {
         lin.hold_contacts(t, ps, mask, scratch);
     }
     Ok((lin, ps, a))
@@ -100,7 +100,11 @@ impl Default for LinearlyImplicitEuler {
             rhs: vec![],
             dv: vec![],
             mask: vec![],
-            holds: NormalHolds::default(),
+            // Its triangles' holds carry their collider's friction, its particles' too.
+            holds: NormalHolds {
+                face_friction: true,
+                ..NormalHolds::default()
+            },
             last: PcgReport::default(),
             stats: IntegratorStats::default(),
         }
@@ -338,7 +342,6 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         lin.total_forces(t, ps, &mut self.f0);
         self.holds.reserve_for(n);
-        self.holds.face_friction = true;
         // Particles and triangles resting on colliders, or that the step would take into
         // them: held along the normals inside the solve. The particles' friction, pressed by
         // the forces at the step's start, is linearized at the start's velocities as the
