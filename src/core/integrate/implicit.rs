@@ -269,8 +269,11 @@ fn solve_holding(
     if report.failed && !holds.filters.is_empty() {
         // Round-off can end a filtered solve that needs hundreds of iterations with a
         // non-positive curvature: solved without the holds instead, as before them (the
-        // contact after the step still stops what goes in).
+        // contact after the step still stops what goes in). From a fresh start: the failed
+        // solve's iterate may be anything, overflowed included.
         holds.clear();
+        let n = lin.particles().min(x.len());
+        x[..n].fill(Vector::ZERO);
         report = solve(a, rhs, &[], x);
         stats.linear_solves += 1;
         stats.linear_iterations += report.iterations as u64;
