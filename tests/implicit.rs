@@ -1117,6 +1117,36 @@ fn large_system(
     (a, b, mask)
 }
 
+/// Holds on a system's free particles (`mask` non-zero), as contacts hold them: every
+/// `every`-th along a random unit direction `e` at the velocity `speed(k) e` (`k` its place
+/// among those held), and every `second`-th of those along a second random direction too, at
+/// rest; the directions drawn from `r`.
+fn random_holds(
+    mask: &[Scalar],
+    (every, second): (usize, usize),
+    r: &mut u64,
+    speed: impl Fn(usize) -> Scalar,
+) -> NormalHolds {
+    let mut unit = || {
+        let v = Vector::new(
+            lcg(r) as Scalar - 0.5,
+            lcg(r) as Scalar - 0.5,
+            lcg(r) as Scalar - 0.5,
+        );
+        v / v.length()
+    };
+    let mut holds = NormalHolds::default();
+    let free = (0..mask.len()).filter(|&i| mask[i] != 0.0);
+    for (k, i) in free.step_by(every).enumerate() {
+        let e = unit();
+        holds.raw.push((i as u32, e, e * speed(k), 0.0));
+        if k % second == 0 {
+            holds.raw.push((i as u32, unit(), Vector::ZERO, 0.0));
+        }
+    }
+    holds
+}
+
 /// `Σ uᵢ · vᵢ` in f64.
 fn dot64(u: &[Vector], v: &[Vector]) -> f64 {
     u.iter().zip(v).map(|(a, b)| a.dot(*b) as f64).sum()
@@ -1352,24 +1382,7 @@ fn multigrid_on_a_filtered_system_keeps_the_free_directions_and_solves() {
     let (a, b, mask) = large_system(&cm, cs, h, 10);
     let n = a.len();
     let mut r = 5u64;
-    let unit = |r: &mut u64| {
-        let v = Vector::new(
-            lcg(r) as Scalar - 0.5,
-            lcg(r) as Scalar - 0.5,
-            lcg(r) as Scalar - 0.5,
-        );
-        v / v.length()
-    };
-    let mut holds = NormalHolds::default();
-    for (k, i) in (0..n).filter(|&i| mask[i] != 0.0).step_by(23).enumerate() {
-        let e = unit(&mut r);
-        holds
-            .raw
-            .push((i as u32, e, e * (0.1 * (k % 5) as Scalar), 0.0));
-        if k % 3 == 0 {
-            holds.raw.push((i as u32, unit(&mut r), Vector::ZERO, 0.0));
-        }
-    }
+    let mut holds = random_holds(&mask, (23, 3), &mut r, |k| 0.1 * (k % 5) as Scalar);
     let mut x0 = vec![Vector::ZERO; n];
     holds.settle(None, &mut x0);
     let filters = holds.filters.clone();
@@ -1481,25 +1494,7 @@ fn filtered_conjugate_gradients_end_at_the_round_off_of_large_prescribed_parts()
     let (cm, cs) = build::cloth(&cloth).unwrap().build().unwrap();
     let (a, b, mask) = large_system(&cm, cs, 1.0 / 60.0, 10);
     let n = a.len();
-    let mut r = 17u64;
-    let unit = |r: &mut u64| {
-        let v = Vector::new(
-            lcg(r) as Scalar - 0.5,
-            lcg(r) as Scalar - 0.5,
-            lcg(r) as Scalar - 0.5,
-        );
-        v / v.length()
-    };
-    let mut holds = NormalHolds::default();
-    for (k, i) in (0..n).filter(|&i| mask[i] != 0.0).step_by(7).enumerate() {
-        let e = unit(&mut r);
-        holds
-            .raw
-            .push((i as u32, e, e * (20.0 * (1 + k % 3) as Scalar), 0.0));
-        if k % 4 == 0 {
-            holds.raw.push((i as u32, unit(&mut r), Vector::ZERO, 0.0));
-        }
-    }
+    let mut holds = random_holds(&mask, (7, 4), &mut 17, |k| 20.0 * (1 + k % 3) as Scalar);
     let mut x0 = vec![Vector::ZERO; n];
     holds.settle(None, &mut x0);
     let filters = holds.filters.clone();
