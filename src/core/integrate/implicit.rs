@@ -259,6 +259,7 @@ fn solve_holding(
     (points, last_try): (bool, bool),
     stats: &mut IntegratorStats,
 ) -> PcgReport {
+    let n = lin.particles().min(x.len());
     holds.settle(base, x);
     let mut report = solve(a, rhs, &holds.filters, x);
     stats.linear_solves += 1;
@@ -272,13 +273,11 @@ fn solve_holding(
         // contact after the step still stops what goes in). From a fresh start: the failed
         // solve's iterate may be anything, overflowed included.
         holds.clear();
-        let n = lin.particles().min(x.len());
         x[..n].fill(Vector::ZERO);
         report = solve(a, rhs, &[], x);
         stats.linear_solves += 1;
         stats.linear_iterations += report.iterations as u64;
     }
-    let n = lin.particles().min(x.len());
     let trials = lin.may_hold_faces(points);
     let rounds = if trials || base.is_some() && !holds.drag.is_empty() {
         HOLD_ROUNDS
