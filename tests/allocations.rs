@@ -2,7 +2,7 @@
 //! allocator. After one warm-up frame (scratch states are created on the first step), whole
 //! frames of every integrator on a cloth with wind, dampers, drag, pins and a collider make no
 //! heap allocation at all; nor do the implicit methods' frames on a tet body resting on the
-//! ground.
+//! ground, nor the constrained solve of triangles held at their contact points.
 //!
 //! Without the test harness (`harness = false`): the harness's own thread allocates when it
 //! first waits for a test's result, and under load that can fall inside a counted window.
@@ -11,8 +11,11 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+use bevy_soft_body::core::collide::{FaceHold, NormalHolds};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
+use bevy_soft_body::core::jacobian::Linearization;
+use bevy_soft_body::core::solve::{Pcg, Preconditioner};
 use bevy_soft_body::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -41,7 +44,7 @@ static GLOBAL: Counting = Counting;
 fn main() {
     frames_allocate_nothing_after_the_first();
     println!(
-        "allocations: every integrator's frames (Auto's after its decision), the chunked kernels, the implicit solve on the team, tets resting on the ground and self-collision allocate nothing"
+        "allocations: every integrator's frames (Auto's after its decision), the chunked kernels, the implicit solve on the team, tets resting on the ground, triangles held at points and self-collision allocate nothing"
     );
 }
 
@@ -187,6 +190,61 @@ fn frames_allocate_nothing_after_the_first() {
         assert_eq!(
             n, 0,
             "{kind} ({solver:?}), tets on the ground: {n} allocations in 30 frames"
+        );
+    }
+    // Triangles held at their contact points (a row of the solve each, as on a thin rod):
+    // the rows, their factors, the friction's fit of the contact forces and the
+    // constrained solve with either preconditioner reuse their buffers. Counted on the
+    // solve itself: a whole step on a thin collider also asks parry's penetration query
+    // (EPA) about the triangles it takes in, and that allocates.
+    let mut scene = build::cloth(&build::ClothParams {
+        rows: 16,
+        cols: 16,
+        ..Default::default()
+    })
+    .unwrap();
+    scene.gravity = [0.0, -9.81, 0.0];
+    let (model, state) = scene.build().unwrap();
+    let n = state.len();
+    let mut a = model.new_matrix();
+    let mut kv = vec![Vector::ZERO; n];
+    model.assemble(&state, 1.0 / 60.0, true, &mut a, &mut kv);
+    let mut mask = vec![0.0; n];
+    model.free_mask(&mut mask);
+    let mut f = vec![Vector::ZERO; n];
+    model.total_forces(0.0, &state, &mut f);
+    let b: Vec<Vector> = f.iter().map(|f| *f * (1.0 / 60.0)).collect();
+    let mut holds = NormalHolds::default();
+    let up = Vector::new(0.0, 1.0, 0.0);
+    for row in 4..12u32 {
+        let ids = [16 * row + 7, 16 * row + 8, 16 * (row + 1) + 7];
+        holds.faces.push(FaceHold {
+            ids,
+            weights: [0.3, 0.5, 0.2],
+            free: ids.map(|i| mask[i as usize] != 0.0),
+            normal: up,
+            velocity: Vector::ZERO,
+            friction: 0.5,
+        });
+    }
+    holds.raw.push((16 * 5 + 3, up, Vector::ZERO, 0.5));
+    for pre in [Preconditioner::BlockJacobi, Preconditioner::Multigrid] {
+        let mut pcg = Pcg::new(1e-6, 200).with_preconditioner(pre);
+        let mut x = vec![Vector::ZERO; n];
+        let mut round = |holds: &mut NormalHolds, x: &mut Vec<Vector>| {
+            holds.start_friction(|i| f[i]);
+            holds.settle(Some(&state.v), x);
+            pcg.solve_constrained(&a, &b, x, &mask, &holds.filters, &mut holds.rows)
+        };
+        assert!(round(&mut holds, &mut x).converged);
+        let before = ALLOCS.load(Ordering::Relaxed);
+        for _ in 0..5 {
+            assert!(round(&mut holds, &mut x).converged);
+        }
+        let n = ALLOCS.load(Ordering::Relaxed) - before;
+        assert_eq!(
+            n, 0,
+            "{pre:?}: rows and the constrained solve: {n} allocations"
         );
     }
     // Self-collision: a 16² cloth of the pile, on the sphere and the ground; its passes reuse

@@ -7,7 +7,7 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
-use bevy_soft_body::core::collide::NormalHolds;
+use bevy_soft_body::core::collide::{FaceHold, NormalHolds};
 use bevy_soft_body::core::integrate::{BackwardEuler, Integrator};
 use bevy_soft_body::core::jacobian::Linearization;
 use bevy_soft_body::core::scene::{ParticleDesc, SpringDesc};
@@ -594,6 +594,128 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
         let rp = SparseCholesky::new().solve(&a, &b, &mut p, &mask);
         let rq = chol.solve_filtered(&a, &b, &mut q, &mask, &[]);
         assert_eq!((p, rp), (q, rq), "{case}");
+    }
+}
+
+/// Triangles held at points inside them ([`FaceHold`]: a row `Σ wⱼ n · xⱼ = n · v` on three
+/// particles), on top of particles held along directions and a pin: the constrained solve
+/// equals the solution of the whole system with the constraints as Lagrange multipliers,
+/// `[A Kᵀ; K 0] [x; λ] = [b; k]`, by dense elimination (the reference knows nothing of
+/// projections). One triangle has the pinned particle as a corner (its part of the row is
+/// known), one a particle held along a direction, and one is given twice (the copy is
+/// dropped as dependent; the reference has it once).
+#[test]
+fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
+    let (model, st) = network(5, true);
+    let n = st.len();
+    let h = 0.02 as Scalar;
+    let mut a: SpringMatrix = model.new_matrix();
+    let mut kv = vec![Vector::ZERO; n];
+    model.assemble(&st, h, true, &mut a, &mut kv);
+    let mut mask = vec![0.0; n];
+    model.free_mask(&mut mask);
+    assert_eq!(mask[0], 0.0, "particle 0 is pinned");
+    let b: Vec<Vector> = (0..n)
+        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
+        .collect();
+    let mut r = 42u64;
+    let mut unit = || {
+        let v = Vector::new(
+            (lcg(&mut r) - 0.5) as Scalar,
+            (lcg(&mut r) - 0.5) as Scalar,
+            (lcg(&mut r) - 0.5) as Scalar,
+        );
+        v / v.length()
+    };
+    let mut holds = NormalHolds::default();
+    let (n2, n6a, n6b) = (unit(), unit(), unit());
+    holds.raw.push((2, n2, n2 * 0.7, 0.0));
+    holds.raw.push((6, n6a, Vector::ZERO, 0.0));
+    holds.raw.push((6, n6b, Vector::ZERO, 0.0));
+    let faces = [
+        ([1, 3, 4], [0.2, 0.5, 0.3], -0.4),
+        ([3, 5, 7], [0.6, 0.1, 0.3], 0.25),
+        ([0, 4, 5], [0.5, 0.25, 0.25], 0.1),
+        ([2, 5, 7], [0.3, 0.3, 0.4], -0.6),
+    ];
+    let mut normals = vec![];
+    for (ids, w, speed) in faces {
+        let nrm = unit();
+        normals.push(nrm);
+        holds.faces.push(FaceHold {
+            ids,
+            weights: w,
+            free: ids.map(|i| mask[i as usize] != 0.0),
+            normal: nrm,
+            velocity: nrm * speed,
+            friction: 0.0,
+        });
+    }
+    let copy = holds.faces[0];
+    holds.faces.push(copy);
+    // The pin's start value (its row's known part) and the start of the solve.
+    let mut x0 = vec![Vector::ZERO; n];
+    x0[0] = Vector::new(0.3, -0.2, 0.1);
+    holds.settle(None, &mut x0);
+    assert_eq!(holds.rows.kept(), faces.len(), "the copy dropped");
+
+    // The reference: every constraint a row of `K`.
+    let dense = a.to_dense();
+    let mut k: Vec<(Vec<f64>, f64)> = vec![];
+    let mut row = |parts: &[(usize, Vector, f64)], value: f64| {
+        let mut v = vec![0.0; 3 * n];
+        for &(i, d, w) in parts {
+            for c in 0..3 {
+                v[3 * i + c] += w * d[c] as f64;
+            }
+        }
+        k.push((v, value));
+    };
+    for c in 0..3 {
+        let mut e = Vector::ZERO;
+        e[c] = 1.0;
+        row(&[(0, e, 1.0)], x0[0][c] as f64);
+    }
+    row(&[(2, n2, 1.0)], 0.7);
+    row(&[(6, n6a, 1.0)], 0.0);
+    row(&[(6, n6b, 1.0)], 0.0);
+    for ((ids, w, speed), nrm) in faces.iter().zip(&normals) {
+        let parts: Vec<_> = (0..3)
+            .map(|j| (ids[j] as usize, *nrm, w[j] as f64))
+            .collect();
+        row(&parts, *speed as f64);
+    }
+    let m = 3 * n + k.len();
+    let mut kkt = vec![vec![0.0; m]; m];
+    let mut rhs = vec![0.0; m];
+    for i in 0..3 * n {
+        kkt[i][..3 * n].copy_from_slice(&dense[i]);
+        rhs[i] = b[i / 3][i % 3] as f64;
+    }
+    for (q, (v, value)) in k.iter().enumerate() {
+        for c in 0..3 * n {
+            kkt[3 * n + q][c] = v[c];
+            kkt[c][3 * n + q] = v[c];
+        }
+        rhs[3 * n + q] = *value;
+    }
+    let xr = dense_solve(kkt, rhs);
+    let scale = xr[..3 * n].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let tol = if F64 { 1e-10 } else { 1e-5 };
+    for pre in [Preconditioner::BlockJacobi, Preconditioner::Multigrid] {
+        let mut pcg = Pcg::new(tol as Scalar, 200).with_preconditioner(pre);
+        let mut x = x0.clone();
+        let rep = pcg.solve_constrained(&a, &b, &mut x, &mask, &holds.filters, &mut holds.rows);
+        println!("{pre:?}: {rep:?}");
+        assert!(rep.converged, "{pre:?}: {rep:?}");
+        for q in 0..3 * n {
+            let got = x[q / 3][q % 3] as f64;
+            assert!(
+                (got - xr[q]).abs() <= 100.0 * tol * scale,
+                "{pre:?}, dof {q}: {got} vs {}",
+                xr[q]
+            );
+        }
     }
 }
 

@@ -16,6 +16,7 @@
 
 use crate::core::kernels::{SharedMut, for_each_range};
 use crate::core::motion::Motion;
+use crate::core::solve::PointRows;
 use crate::math::{Matrix3, Scalar, ToScalar, Vector, VectorExt};
 use parry3d::math::{Pose3, Rot3};
 pub use parry3d::shape::SharedShape;
@@ -785,6 +786,11 @@ impl Collider {
     /// with a [`Response`] holds nothing, as in [`Collider::hold`]: its body would never feel
     /// the constraint's force.
     ///
+    /// With `at_points`, a triangle is held at its contact point instead
+    /// ([`FaceHold`], pushed there; nothing onto `out`): if the point is not moving away from
+    /// the collider and the free corners' forces push it towards it (`Σ wⱼ fⱼ · n / mⱼ ≤ 0`),
+    /// its velocity along the normal is held, and the triangle stays free to tip about it.
+    ///
     /// An implicit step that instead let its springs pull a cloth's corners round a rod
     /// about as wide as its cells, and pushed the triangles back out after the step, did
     /// work against the stretched springs at every step: the cloth stayed wedged on the rod.
@@ -802,6 +808,7 @@ impl Collider {
         inv_mass: &[Scalar],
         mask: &[Scalar],
         out: &mut Vec<(u32, Vector, Vector, Scalar)>,
+        mut at_points: Option<&mut Vec<FaceHold>>,
     ) {
         if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) {
             return;
@@ -815,7 +822,7 @@ impl Collider {
             .min(f.len())
             .min(inv_mass.len())
             .min(mask.len());
-        for (ids, (_, point, nrm, dist)) in self.faces_within(&pose, thick, edge, faces, x, n) {
+        for (ids, (bary, point, nrm, dist)) in self.faces_within(&pose, thick, edge, faces, x, n) {
             let vc = Self::surface_velocity(&pose, point);
             // A triangle that may cross more than the thickness in the step is not held: the
             // contact after the step knows the side it came from (`resolve_faces`' swept
@@ -827,6 +834,30 @@ impl Collider {
             }
             // Approaching no faster than it does, and not past the thickness.
             let allowed = -(dist - thick + slack).max(0.0) / h;
+            if let Some(holds) = at_points.as_deref_mut() {
+                // Held at the contact point: its velocity along the normal, and its
+                // acceleration by the free corners' forces.
+                let free = ids.map(|i| inv_mass[i] != 0.0 && mask[i] != 0.0);
+                let (mut vn, mut an) = (0.0, 0.0);
+                for k in 0..3 {
+                    let i = ids[k];
+                    vn += bary[k] * (v[i] - vc).dot(nrm);
+                    if free[k] {
+                        an += bary[k] * inv_mass[i] * f[i].dot(nrm);
+                    }
+                }
+                if free.iter().any(|&f| f) && vn <= 0.0 && an <= 0.0 {
+                    holds.push(FaceHold {
+                        ids: ids.map(|i| i as u32),
+                        weights: bary,
+                        free,
+                        normal: nrm,
+                        velocity: vc + nrm * vn.max(allowed),
+                        friction: mu,
+                    });
+                }
+                continue;
+            }
             for i in ids {
                 let vn = (v[i] - vc).dot(nrm);
                 if inv_mass[i] != 0.0 && mask[i] != 0.0 && vn <= 0.0 && f[i].dot(nrm) <= 0.0 {
@@ -1838,6 +1869,27 @@ pub const FACE_SWEEPS: u32 = 32;
 /// against a sphere and the ground; smaller under Miri).
 const RESOLVE_CHUNK: usize = crate::core::kernels::chunk_limit(512, 64);
 
+/// A triangle resting on a collider, held at its contact point for one implicit step
+/// ([`Collider::hold_faces`] with points, [`NormalHolds::faces`]): the velocity of the point
+/// `Σ wⱼ vⱼ` along the normal is prescribed, and the corners are otherwise free, so the
+/// triangle can tip about the contact (see [`crate::core::solve::rows`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FaceHold {
+    /// The corners.
+    pub ids: [u32; 3],
+    /// The contact point's barycentric weights.
+    pub weights: [Scalar; 3],
+    /// Which corners are free (not pinned, not prescribed).
+    pub free: [bool; 3],
+    /// The contact's unit normal.
+    pub normal: Vector,
+    /// A velocity whose component along the normal is the contact point's prescribed one for
+    /// the step, and whose other components are the collider surface's there.
+    pub velocity: Vector,
+    /// The collider's friction coefficient.
+    pub friction: Scalar,
+}
+
 /// Particles held along contact normals for one implicit step: Baraff and Witkin's
 /// constraint filter (*Large steps in cloth simulation*, 1998, §5.3) with one or two
 /// constrained directions per particle, each with its prescribed velocity along it. The raw
@@ -1872,6 +1924,21 @@ pub struct NormalHolds {
     pub trial: Vec<Vector>,
     /// The last round's answer, kept while the next is solved (scratch).
     pub kept: Vec<Vector>,
+    /// Triangles held at their contact points, where the step holds them so
+    /// ([`NormalHolds::face_points`]); their corners are then not in [`NormalHolds::raw`].
+    pub faces: Vec<FaceHold>,
+    /// The rows [`NormalHolds::settle`] made of [`NormalHolds::faces`], for the solve.
+    pub rows: PointRows,
+    /// Whether resting triangles are held at their contact points (rows of the solve that
+    /// take combinations of particles: [`LinearSolver::takes_rows`]) rather than at each
+    /// corner along the normal.
+    ///
+    /// [`LinearSolver::takes_rows`]: crate::core::solve::LinearSolver::takes_rows
+    pub face_points: bool,
+    /// Scratch of [`NormalHolds::start_friction`]: each particle's force left unbalanced
+    /// by the triangles' contact forces, and the triangles' contact forces.
+    pub(crate) pressed: Vec<Vector>,
+    pub(crate) face_force: Vec<Scalar>,
     /// Whether the triangles' holds carry their collider's friction (one per corner,
     /// [`NormalHolds::one_friction_per_particle`]) or are frictionless; the particles' own
     /// holds carry it either way. Linearly implicit Euler sets it; backward Euler leaves it
@@ -1898,6 +1965,9 @@ impl NormalHolds {
         room(&mut self.contact, n);
         room(&mut self.trial, n);
         room(&mut self.kept, n);
+        room(&mut self.faces, 2 * n);
+        room(&mut self.face_force, 2 * n);
+        room(&mut self.pressed, n);
     }
 
     /// Forgets the last step's holds.
@@ -1907,6 +1977,8 @@ impl NormalHolds {
         self.contact.clear();
         self.drag.clear();
         self.linearized.clear();
+        self.faces.clear();
+        self.rows.clear();
     }
 
     /// The sliding speed (m/s) below which friction is smoothed to zero at rest (Li et al.
@@ -1920,6 +1992,13 @@ impl NormalHolds {
     /// gets the force `−μ N f₁(|u|) u/|u|` of its sliding `u = (I − n nᵀ)(v − vₚ)` across
     /// the normal (Coulomb's, smoothed below [`NormalHolds::STATIC_SPEED`]; the normal force
     /// and the normal lagged from the start, as Li et al. 2020 lag them).
+    ///
+    /// A triangle held at its contact point ([`NormalHolds::faces`]) has Coulomb's friction
+    /// there, pressed by its contact force `Λ ≥ 0`: the forces that balance its free corners'
+    /// pushes onto the collider best (least squares over all the triangles, `Σₖ wₖⱼ Λₖ nₖ`
+    /// against `−pⱼ` at each corner `j`, by projected Gauss–Seidel). Each corner gets the
+    /// drag of its share, `μ wⱼ Λ` (as one body sliding, the triangle's corners together get
+    /// `μ Λ`). A corner with a hold of its own and friction takes that one alone.
     pub fn start_friction(&mut self, press: impl Fn(usize) -> Vector) {
         self.drag.clear();
         for &(i, n, vp, mu) in &self.raw {
@@ -1928,7 +2007,72 @@ impl NormalHolds {
                 self.drag.push((i, n, bound, vp));
             }
         }
+        if !self.faces.iter().any(|f| f.friction > 0.0) {
+            return;
+        }
+        let top = self
+            .faces
+            .iter()
+            .flat_map(|f| f.ids)
+            .max()
+            .map_or(0, |i| i as usize + 1);
+        if self.pressed.len() < top {
+            self.pressed.resize(top, Vector::ZERO);
+        }
+        for f in &self.faces {
+            for (k, &i) in f.ids.iter().enumerate() {
+                if f.free[k] {
+                    self.pressed[i as usize] = press(i as usize);
+                }
+            }
+        }
+        self.face_force.clear();
+        self.face_force.resize(self.faces.len(), 0.0);
+        for _ in 0..Self::FORCE_SWEEPS {
+            for (f, lam) in self.faces.iter().zip(&mut self.face_force) {
+                let (mut num, mut den) = (0.0, 0.0);
+                for k in 0..3 {
+                    if f.free[k] {
+                        num += f.weights[k] * f.normal.dot(self.pressed[f.ids[k] as usize]);
+                        den += f.weights[k] * f.weights[k];
+                    }
+                }
+                if den <= 0.0 {
+                    continue;
+                }
+                let next = (*lam - num / den).max(0.0);
+                let d = next - *lam;
+                *lam = next;
+                for k in 0..3 {
+                    if f.free[k] {
+                        self.pressed[f.ids[k] as usize] += f.normal * (f.weights[k] * d);
+                    }
+                }
+            }
+        }
+        // Corners with friction of their own: marked by a non-finite force left.
+        let own = Vector::splat(Scalar::INFINITY);
+        for d in &self.drag {
+            if let Some(p) = self.pressed.get_mut(d.0 as usize) {
+                *p = own;
+            }
+        }
+        for (f, &lam) in self.faces.iter().zip(&self.face_force) {
+            if !(f.friction > 0.0 && lam > 0.0 && lam.is_finite()) {
+                continue;
+            }
+            for k in 0..3 {
+                let i = f.ids[k];
+                let bound = f.friction * f.weights[k] * lam;
+                if f.free[k] && bound > 0.0 && self.pressed[i as usize] != own {
+                    self.drag.push((i, f.normal, bound, f.velocity));
+                }
+            }
+        }
     }
+
+    /// Sweeps of [`NormalHolds::start_friction`]'s fit of the triangles' contact forces.
+    const FORCE_SWEEPS: usize = 16;
 
     /// A hold's sliding at velocity `v`: `u = (I − n nᵀ)(v − vₚ)`, its length, and the
     /// projector `I − n nᵀ`.
@@ -2117,6 +2261,9 @@ impl NormalHolds {
                 h.3 = 0.0;
             }
         }
+        for f in &mut self.faces {
+            f.friction = 0.0;
+        }
     }
 
     /// Leaves one friction coefficient per particle among the holds `raw[from..]` (those one
@@ -2193,6 +2340,29 @@ impl NormalHolds {
             self.filters.push((i as u32, s));
             self.contact.push((first, vp, mu));
         }
+        // The triangles held at their contact points: `Σ wⱼ n · vⱼ = n · v_c` at the step's
+        // end, on the free corners' unknowns (the others' end velocities known).
+        self.rows.clear();
+        for f in &self.faces {
+            let n = f.normal;
+            let mut target = n.dot(f.velocity);
+            let mut coef = [Vector::ZERO; 3];
+            for (k, c) in coef.iter_mut().enumerate() {
+                let (i, w) = (f.ids[k] as usize, f.weights[k]);
+                if let Some(b) = base {
+                    target -= w * n.dot(b[i]);
+                }
+                if f.free[k] {
+                    *c = n * w;
+                } else {
+                    target -= w * n.dot(x[i]);
+                }
+            }
+            if coef.iter().any(|c| *c != Vector::ZERO) {
+                self.rows.push(f.ids, coef, target);
+            }
+        }
+        self.rows.factor(&self.filters, x);
     }
 }
 

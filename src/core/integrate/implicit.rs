@@ -4,7 +4,7 @@ use super::{Integrator, IntegratorKind, IntegratorStats, StepError, check_h};
 use crate::core::collide::NormalHolds;
 use crate::core::jacobian::Linearization;
 use crate::core::ode::{OdeState, OdeSystem, ParticleState};
-use crate::core::solve::{LinearSolver, Pcg, PcgReport, SpringMatrix, filter_rows};
+use crate::core::solve::{LinearSolver, Pcg, PcgReport, PointRows, SpringMatrix, filter_rows};
 use crate::math::{Matrix3, Scalar, Vector};
 
 /// What every implicit step starts with: the step size checked, the system's linearization
@@ -72,6 +72,14 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// far as Coulomb's law says, and one draped on a sphere in frame-long steps comes to
 /// static equilibrium; with the contact left to after the step it came to rest with forces
 /// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
+///
+/// With PCG, a triangle resting on a collider at its start is held at its contact point
+/// rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
+/// the contact, and a strip hung off-centre over a thin rod slides off towards its long
+/// side. Its friction is pressed by the contact force that balances its corners' pushes. What
+/// the solve takes into a collider is still held at its corners (a triangle turning on a
+/// rod within a step rolls, and held at one point it cut into the rod), and so is
+/// everything with the sparse Cholesky, which takes no such rows.
 #[derive(Clone, Debug)]
 pub struct LinearlyImplicitEuler {
     /// The linear solver (PCG by default: tolerance, iteration cap).
@@ -180,6 +188,8 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
+        // Resting triangles held at their contact points (PCG takes such rows).
+        self.holds.face_points = true;
         lin.hold_faces(t, h, ps, &self.f, &self.mask, false, &mut self.holds);
         lin.assemble_damping(ps, h, a);
         let m = lin.masses();
@@ -202,7 +212,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             (a, &mut self.rhs),
             &mut self.v1,
             |i, v1| x[i] + (v[i] + v1) * (0.5 * h * mask[i]),
-            |a, rhs, filters, v1| pcg.solve_filtered(a, rhs, v1, mask, filters),
+            |a, rhs, (filters, rows), v1| pcg.solve_constrained(a, rhs, v1, mask, filters, rows),
             (false, true),
             &mut self.stats,
         );
@@ -255,26 +265,31 @@ fn solve_holding(
     (a, rhs): (&mut SpringMatrix, &mut [Vector]),
     x: &mut [Vector],
     end: impl Fn(usize, Vector) -> Vector,
-    mut solve: impl FnMut(&SpringMatrix, &[Vector], &[(u32, Matrix3)], &mut [Vector]) -> PcgReport,
+    mut solve: impl FnMut(
+        &SpringMatrix,
+        &[Vector],
+        (&[(u32, Matrix3)], &mut PointRows),
+        &mut [Vector],
+    ) -> PcgReport,
     (points, last_try): (bool, bool),
     stats: &mut IntegratorStats,
 ) -> PcgReport {
     let n = lin.particles().min(x.len());
     holds.settle(base, x);
-    let mut report = solve(a, rhs, &holds.filters, x);
+    let mut report = solve(a, rhs, (&holds.filters, &mut holds.rows), x);
     stats.linear_solves += 1;
     stats.linear_iterations += report.iterations as u64;
     if report.failed && !last_try {
         return report;
     }
-    if report.failed && !holds.filters.is_empty() {
+    if report.failed && (!holds.filters.is_empty() || !holds.rows.is_empty()) {
         // Round-off can end a filtered solve that needs hundreds of iterations with a
         // non-positive curvature: solved without the holds instead, as before them (the
         // contact after the step still stops what goes in). From a fresh start: the failed
         // solve's iterate may be anything, overflowed included.
         holds.clear();
         x[..n].fill(Vector::ZERO);
-        report = solve(a, rhs, &[], x);
+        report = solve(a, rhs, (&[], &mut holds.rows), x);
         stats.linear_solves += 1;
         stats.linear_iterations += report.iterations as u64;
     }
@@ -304,7 +319,7 @@ fn solve_holding(
         holds.kept.clear();
         holds.kept.extend_from_slice(&x[..n]);
         holds.settle(base, x);
-        let next = solve(a, rhs, &holds.filters, x);
+        let next = solve(a, rhs, (&holds.filters, &mut holds.rows), x);
         stats.linear_solves += 1;
         stats.linear_iterations += next.iterations as u64;
         if next.failed || !next.converged && report.converged {
@@ -344,6 +359,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         lin.total_forces(t, ps, &mut self.f0);
         self.holds.reserve_for(n);
+        // Resting triangles held at their contact points where the solver takes such rows
+        // (PCG), at their corners otherwise.
+        self.holds.face_points = self.solver.takes_rows();
         // Particles and triangles resting on colliders, or that the step would take into
         // them: held along the normals inside the solve. The particles' friction, pressed by
         // the forces at the step's start, is linearized at the start's velocities as the
@@ -384,7 +402,9 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
                 (a, &mut self.rhs),
                 &mut self.dv,
                 |i, dv| x[i] + (v[i] + dv) * (h * mask[i]),
-                |a, rhs, filters, dv| solver.solve_filtered(a, rhs, dv, mask, filters),
+                |a, rhs, (filters, rows), dv| {
+                    solver.solve_constrained(a, rhs, dv, mask, filters, rows)
+                },
                 (true, k + 1 == tries.len()),
                 &mut self.stats,
             );

@@ -18,9 +18,11 @@ pub(crate) mod bands;
 pub(crate) mod cholesky;
 pub mod multigrid;
 pub(crate) mod packed;
+pub mod rows;
 
 pub use cholesky::SparseCholesky;
 pub use multigrid::Multigrid;
+pub use rows::PointRows;
 
 use crate::core::forces::Springs;
 use crate::core::kernels::{self, SharedMut};
@@ -620,6 +622,31 @@ impl LinearSolver {
         }
     }
 
+    /// [`LinearSolver::solve_filtered`] with constraints on combinations of particles as
+    /// well ([`PointRows`]: triangles held at their contact points), for the solvers that
+    /// take them ([`LinearSolver::takes_rows`]: PCG, [`Pcg::solve_constrained`]). The
+    /// Cholesky solve takes none; it solves with the particles' filters alone (the caller
+    /// holds the triangles at their corners instead).
+    pub fn solve_constrained(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+        rows: &mut PointRows,
+    ) -> SolveReport {
+        match self {
+            LinearSolver::Pcg(p) => p.solve_constrained(a, b, x, mask, filters, rows),
+            LinearSolver::Cholesky(c) => c.solve_filtered(a, b, x, mask, filters),
+        }
+    }
+
+    /// Whether [`LinearSolver::solve_constrained`] holds its [`PointRows`].
+    pub fn takes_rows(&self) -> bool {
+        matches!(self, LinearSolver::Pcg(_))
+    }
+
     /// Solves with the factorization of the last matrix solved (modified Newton); `None`
     /// when the solver keeps none (PCG) or has none for this structure and these filters.
     /// See [`SparseCholesky::resolve`].
@@ -861,6 +888,27 @@ impl Pcg {
         mask: &[Scalar],
         filters: &[(u32, Matrix3)],
     ) -> PcgReport {
+        self.solve_constrained(a, b, x, mask, filters, &mut PointRows::default())
+    }
+
+    /// [`Pcg::solve_filtered`] with constraints on combinations of particles as well
+    /// ([`PointRows`], factored with these `filters`, and `x` on them): the residual, the
+    /// search directions and `A p` are projected onto the rows' null space too, so `x` keeps
+    /// the rows' prescribed values. The preconditioner is `P B P` (`P` the projector, `B` the
+    /// filtered block-Jacobi or multigrid), positive definite on that subspace (Gould,
+    /// Hribar and Nocedal 2001). With no rows this is [`Pcg::solve_filtered`], bit for bit.
+    ///
+    /// # Panics
+    /// As [`Pcg::solve_filtered`], and if a row's particle is not in the matrix.
+    pub fn solve_constrained(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+        rows: &mut PointRows,
+    ) -> PcgReport {
         let n = a.len();
         for v in [&mut self.r, &mut self.z, &mut self.p, &mut self.q] {
             v.resize(n, Vector::ZERO);
@@ -875,6 +923,9 @@ impl Pcg {
             }
             _ => self.multigrid.setup_filtered(a, mask, filters),
         }
+        if !rows.is_empty() {
+            rows.set_metric(&a.diag, filters);
+        }
         assert!(
             b.len() >= n && x.len() >= n && mask.len() >= n,
             "vectors shorter than the matrix"
@@ -887,7 +938,7 @@ impl Pcg {
             let usable = scratch.packed.update(a);
             Product::of(a, &scratch.packed, usable)
         };
-        let report = self.iterate(op, b, x, mask, filters, &scratch.partials);
+        let report = self.iterate(op, b, x, mask, (filters, rows), &scratch.partials);
         self.scratch = Some(scratch);
         report
     }
@@ -898,21 +949,28 @@ impl Pcg {
         b: &[Vector],
         x: &mut [Vector],
         mask: &[Scalar],
-        filters: &[(u32, Matrix3)],
+        (filters, rows): (&[(u32, Matrix3)], &mut PointRows),
         partials: &Partials,
     ) -> PcgReport {
         let n = op.matrix().len();
-        // The filters' rows after each masked pass (a few particles: on the caller).
-        let filter = |v: &mut [Vector]| filter_rows(filters, v);
+        // Held along directions or combinations: the constrained solve's rules.
+        let has_rows = !rows.is_empty();
+        let constrained = !filters.is_empty() || has_rows;
+        // The filters' rows after each masked pass, then the combinations' projection (a few
+        // particles: on the caller).
+        let filter = |v: &mut [Vector], rows: &mut PointRows| {
+            filter_rows(filters, v);
+            rows.project(v);
+        };
         // r = S (b − A x), and ‖S b‖²
         op.mul_map(x, &mut self.r, |i, ax| (b[i] - ax) * mask[i], None);
-        filter(&mut self.r);
+        filter(&mut self.r, rows);
         let [mut bb] = sum_rows(partials, n, |rows| {
             [rows.map(|i| (b[i] * mask[i]).length_squared()).sum()]
         });
         // The filters take the held parts out of `b` with round-off of `ε ‖b‖`, which no
         // iteration removes from the residual: the floor it can reach.
-        let floor = if filters.is_empty() {
+        let floor = if !constrained {
             0.0
         } else {
             Scalar::EPSILON * bb.sqrt()
@@ -924,8 +982,17 @@ impl Pcg {
         let bnorm = bb.max(0.0).sqrt();
         // With filters, `S b = 0` still leaves the prescribed parts' residual to solve for.
         let prescribed = bnorm == 0.0
-            && !filters.is_empty()
+            && constrained
             && sum_rows(partials, n, |rows| [dot(&self.r, &self.r, rows)])[0] > 0.0;
+        if bnorm == 0.0 && !prescribed && has_rows {
+            // `x` already solves the constrained system (its residual is zero).
+            return PcgReport {
+                iterations: 0,
+                relative_residual: 0.0,
+                converged: true,
+                failed: false,
+            };
+        }
         if bnorm == 0.0 && !prescribed {
             for (xi, m) in x.iter_mut().zip(mask) {
                 if *m != 0.0 {
@@ -944,11 +1011,19 @@ impl Pcg {
                 failed: false,
             };
         }
-        self.precondition(op, mask);
-        // Block-Jacobi's filtered rows made symmetric; the multigrid filters its own.
+        // Block-Jacobi's filtered rows made symmetric; the multigrid filters its own. With
+        // rows, the preconditioner wrapped as `Π B Πᵀ` ([`PointRows::precondition_in`]).
         let jacobi = self.active == Preconditioner::BlockJacobi;
+        if has_rows {
+            rows.precondition_in(&mut self.r);
+        }
+        self.precondition(op, mask);
         if jacobi {
             symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+        }
+        if has_rows {
+            rows.restore(&mut self.r);
+            rows.precondition_out(&mut self.z);
         }
         let [mut rz, rr] = {
             let (p, r, z) = (SharedMut(self.p.as_mut_ptr()), &self.r, &self.z);
@@ -961,12 +1036,12 @@ impl Pcg {
                 [dot(r, z, rows.clone()), dot(r, r, rows)]
             })
         };
-        filter(&mut self.p);
+        filter(&mut self.p, rows);
         // With filters, the prescribed parts of `x` act as a right-hand side `−A x_c` that
         // `S b` does not measure (a contact stopping a falling cloth: `S b` is nearly zero,
         // the prescribed change is not): the tolerance is taken relative to the larger of
         // `‖S b‖` and the first residual, which holds both.
-        let bnorm = if filters.is_empty() {
+        let bnorm = if !constrained {
             bnorm
         } else {
             bnorm.max(rr.sqrt())
@@ -988,7 +1063,7 @@ impl Pcg {
         // `r · z` falls with the square of the residual, and below `ε²` of its start only the
         // rounding of the filters is left in `r`, along the held directions `z` does not see
         // (see `exhausted` below). Without filters, only `r · z = 0` ends the iteration so.
-        let rz_floor = if filters.is_empty() {
+        let rz_floor = if !constrained {
             0.0
         } else {
             rz * Scalar::EPSILON * Scalar::EPSILON
@@ -1002,7 +1077,7 @@ impl Pcg {
             // q = S A p, and p · q
             // (`p = S p`, so `p · A p = p · S A p`.)
             let pq = op.mul_map(&self.p, &mut self.q, |i, ap| ap * mask[i], Some(partials));
-            filter(&mut self.q);
+            filter(&mut self.q, rows);
             if pq.is_nan() || pq <= 0.0 {
                 // Not positive definite along p, or a non-finite value: the answer is unusable.
                 failed = true;
@@ -1014,7 +1089,9 @@ impl Pcg {
                 SharedMut(self.z.as_mut_ptr()),
             );
             let (p, q, inv) = (&self.p, &self.q, &self.inv_diag);
-            let [mut rz_new, rr] = if self.active == Preconditioner::BlockJacobi {
+            // Block-Jacobi without rows: fused, one pass over the vectors.
+            let fused = jacobi && !has_rows;
+            let [mut rz_new, rr] = if fused {
                 // Fused: one pass over the vectors.
                 sum_rows(partials, n, |rows| {
                     // SAFETY: disjoint ranges of `x`, `r` and `z`, which have the matrix's
@@ -1048,11 +1125,21 @@ impl Pcg {
                     }
                     [rr]
                 });
+                if has_rows {
+                    rows.precondition_in(&mut self.r);
+                }
                 self.precondition(op, mask);
+                if jacobi {
+                    symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
+                }
+                if has_rows {
+                    rows.restore(&mut self.r);
+                    rows.precondition_out(&mut self.z);
+                }
                 let (r, z) = (&self.r, &self.z);
                 [sum_rows(partials, n, |rows| [dot(r, z, rows)])[0], rr]
             };
-            if jacobi {
+            if fused {
                 rz_new += symmetric_rows(filters, &self.inv_diag, &self.r, &mut self.z);
             }
             // A residual whose `r · z` fell below `ε²` of the start's is the filters' rounding
@@ -1061,7 +1148,7 @@ impl Pcg {
             // 1/600 s stalled at 1.1 times the floor above, its `r · z` falling to 10⁻²³ of
             // the start's while `α` jumped from 1 to 60–80, and its residual then grew eightfold
             // an iteration until it overflowed.
-            exhausted = if filters.is_empty() {
+            exhausted = if !constrained {
                 rz_new == 0.0
             } else {
                 rz_new <= rz_floor
@@ -1076,7 +1163,7 @@ impl Pcg {
                     *p = (z[i] + *p * beta) * mask[i];
                 }
             });
-            filter(&mut self.p);
+            filter(&mut self.p, rows);
             it += 1;
             rel = rr.sqrt() / bnorm;
             failed |= !rel.is_finite();
