@@ -73,8 +73,8 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// static equilibrium; with the contact left to after the step it came to rest with forces
 /// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
 ///
-/// With PCG, a triangle resting on a collider at its start is held at its contact point
-/// rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
+/// With PCG, a triangle spanning a collider at its start (resting on it, no corner within
+/// its thickness) is held at its contact point rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
 /// the contact, and a strip hung off-centre over a thin rod slides off towards its long
 /// side. Its friction is pressed by the contact force that balances its corners' pushes. What
 /// the solve takes into a collider is still held at its corners (a triangle turning on a
