@@ -11,6 +11,8 @@
 // Casts to and from `Scalar` are no-ops in one precision and needed in the other.
 #![allow(clippy::unnecessary_cast)]
 
+mod common;
+
 use bevy_soft_body::core::collide::{FaceHold, NormalHolds};
 use bevy_soft_body::core::fem::NeoHookean;
 use bevy_soft_body::core::fem::mesh::TetMesh;
@@ -193,46 +195,10 @@ fn frames_allocate_nothing_after_the_first() {
         );
     }
     // A cloth hung over a rod thinner than its cells, linearly implicit Euler with PCG: the
-    // triangles resting on the rod held at their contact points, those the trial takes in
-    // at their corners (their contact in the rod the crate's own, not parry's penetration
+    // triangles spanning the rod held at their contact points, those the trial takes in at
+    // their corners (their contact in the rod the crate's own, not parry's penetration
     // query, which allocates).
-    let mut scene = build::cloth(&build::ClothParams {
-        rows: 16,
-        cols: 16,
-        width: 0.75,
-        height: 0.75,
-        mass: 0.01,
-        k_structural: 200.0,
-        k_shear: 80.0,
-        k_flex: 2.0,
-        damping: 0.02,
-        drag: 0.01,
-        pins: build::ClothPins::None,
-        hanging: false,
-        origin: [0.0, 0.32, 0.0],
-    })
-    .unwrap();
-    scene.gravity = [0.0, -9.81, 0.0];
-    scene.colliders.push(ColliderDesc {
-        shape: ShapeDesc::Capsule {
-            half_height: 0.6,
-            radius: 0.01,
-        },
-        motion: Motion::Fixed {
-            position: [0.0, 0.3, 0.0],
-        },
-        rotation: [
-            std::f64::consts::FRAC_1_SQRT_2,
-            0.0,
-            0.0,
-            std::f64::consts::FRAC_1_SQRT_2,
-        ],
-        material: ContactMaterial {
-            friction: 0.5,
-            thickness: 0.005,
-            ..Default::default()
-        },
-    });
+    let scene = common::cloth_on_a_rod(0.01, 0.3);
     let (model, state) = scene.build().unwrap();
     let cfg = DriverConfig {
         integrator: IntegratorKind::LinearlyImplicitEuler,

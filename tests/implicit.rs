@@ -345,32 +345,40 @@ fn dense_solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Vec<f64> {
     x
 }
 
+/// The random network's system at `h = 0.02` (assembled, with the pin's mask) and a
+/// right-hand side growing with the particle's index.
+fn network_system() -> (ParticleModel, SpringMatrix, Vec<Scalar>, Vec<Vector>) {
+    let (model, st) = network(5, true);
+    let n = st.len();
+    let mut a: SpringMatrix = model.new_matrix();
+    let mut kv = vec![Vector::ZERO; n];
+    model.assemble(&st, 0.02, true, &mut a, &mut kv);
+    let mut mask = vec![0.0; n];
+    model.free_mask(&mut mask);
+    assert_eq!(mask[0], 0.0, "particle 0 is pinned");
+    let b: Vec<Vector> = (0..n)
+        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
+        .collect();
+    (model, a, mask, b)
+}
+
 #[test]
 fn filtered_pcg_equals_the_projected_reduced_solve() {
     // Baraff–Witkin's filter keeps pinned degrees of freedom out of the CG iteration; the
     // answer on the free ones must be the solution of the reduced system (pinned rows and
     // columns removed), computed here by dense elimination.
-    let (model, st) = network(5, true);
-    let h = 0.02 as Scalar;
-    let mut a: SpringMatrix = model.new_matrix();
-    let mut kv = vec![Vector::ZERO; st.len()];
-    model.assemble(&st, h, true, &mut a, &mut kv);
-    let mut mask = vec![0.0; st.len()];
-    model.free_mask(&mut mask);
-    assert_eq!(mask[0], 0.0, "particle 0 is pinned");
-    let b: Vec<Vector> = (0..st.len())
-        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
-        .collect();
+    let (_, a, mask, b) = network_system();
+    let n = b.len();
     let tol = if F64 { 1e-10 } else { 1e-5 };
     let mut pcg = Pcg::new(tol as Scalar, 200);
-    let mut x = vec![Vector::ZERO; st.len()];
+    let mut x = vec![Vector::ZERO; n];
     let rep = pcg.solve(&a, &b, &mut x, &mask);
     println!("{rep:?}");
     assert!(rep.converged, "{rep:?}");
     assert_eq!(x[0], Vector::ZERO, "filtered DOFs keep their value");
 
     let dense = a.to_dense();
-    let free: Vec<usize> = (0..3 * st.len()).filter(|&r| mask[r / 3] == 1.0).collect();
+    let free: Vec<usize> = (0..3 * n).filter(|&r| mask[r / 3] == 1.0).collect();
     let ar: Vec<Vec<f64>> = free
         .iter()
         .map(|&r| free.iter().map(|&c| dense[r][c]).collect())
@@ -413,17 +421,8 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
     // along it and are free across it. The reference: with `U` a basis of the free directions
     // (three axes per free particle, the plane normal to `n` per held one, none for the pin),
     // `x = x₀ + U y` with `(Uᵀ A U) y = Uᵀ (b − A x₀)`, by dense elimination.
-    let (model, st) = network(5, true);
-    let n = st.len();
-    let h = 0.02 as Scalar;
-    let mut a: SpringMatrix = model.new_matrix();
-    let mut kv = vec![Vector::ZERO; n];
-    model.assemble(&st, h, true, &mut a, &mut kv);
-    let mut mask = vec![0.0; n];
-    model.free_mask(&mut mask);
-    let b: Vec<Vector> = (0..n)
-        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
-        .collect();
+    let (_, a, mask, b) = network_system();
+    let n = b.len();
     // Particles 2 and 5 held along unit normals (their prescribed parts in the start value),
     // particle 6 along two.
     let mut r = 99u64;
@@ -606,18 +605,8 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
 /// dropped as dependent; the reference has it once).
 #[test]
 fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
-    let (model, st) = network(5, true);
-    let n = st.len();
-    let h = 0.02 as Scalar;
-    let mut a: SpringMatrix = model.new_matrix();
-    let mut kv = vec![Vector::ZERO; n];
-    model.assemble(&st, h, true, &mut a, &mut kv);
-    let mut mask = vec![0.0; n];
-    model.free_mask(&mut mask);
-    assert_eq!(mask[0], 0.0, "particle 0 is pinned");
-    let b: Vec<Vector> = (0..n)
-        .map(|i| Vector::new(1.0, -2.0, 0.5) * (i as Scalar + 1.0))
-        .collect();
+    let (_, a, mask, b) = network_system();
+    let n = b.len();
     let mut r = 42u64;
     let mut unit = || {
         let v = Vector::new(
