@@ -600,7 +600,7 @@ fn direction_filtered_solves_equal_the_solve_on_the_free_directions() {
 /// particles), on top of particles held along directions and a pin: the constrained solve
 /// equals the solution of the whole system with the constraints as Lagrange multipliers,
 /// `[A Kᵀ; K 0] [x; λ] = [b; k]`, by dense elimination (the reference knows nothing of
-/// projections). One triangle has the pinned particle as a corner (its part of the row is
+/// projections), with PCG and with the sparse Cholesky. One triangle has the pinned particle as a corner (its part of the row is
 /// known), one a particle held along a direction, and one is given twice (the copy is
 /// dropped as dependent; the reference has it once).
 #[test]
@@ -705,6 +705,26 @@ fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
                 xr[q]
             );
         }
+    }
+    // The sparse Cholesky, by the rows' Schur complement: to round-off of a direct solve.
+    let direct = if F64 { 1e-10 } else { 1e-4 };
+    let mut x = x0.clone();
+    let rep = SparseCholesky::new().solve_constrained(
+        &a,
+        &b,
+        &mut x,
+        &mask,
+        &holds.filters,
+        &mut holds.rows,
+    );
+    assert!(rep.converged && !rep.failed, "Cholesky: {rep:?}");
+    for q in 0..3 * n {
+        let got = x[q / 3][q % 3] as f64;
+        assert!(
+            (got - xr[q]).abs() <= direct * scale,
+            "Cholesky, dof {q}: {got} vs {}",
+            xr[q]
+        );
     }
 }
 

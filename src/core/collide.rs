@@ -2000,11 +2000,10 @@ pub struct NormalHolds {
     pub faces: Vec<FaceHold>,
     /// The rows [`NormalHolds::settle`] made of [`NormalHolds::faces`], for the solve.
     pub rows: PointRows,
-    /// Whether resting triangles are held at their contact points (rows of the solve that
-    /// take combinations of particles: [`LinearSolver::takes_rows`]) rather than at each
-    /// corner along the normal.
-    ///
-    /// [`LinearSolver::takes_rows`]: crate::core::solve::LinearSolver::takes_rows
+    /// Whether triangles spanning a collider are held at their contact points (rows of the
+    /// solve on combinations of particles: [`PointRows`]) rather than at each corner along
+    /// the normal. Linearly implicit Euler and the trapezoid with implicit damping set it;
+    /// backward Euler leaves it off.
     pub face_points: bool,
     /// Scratch of [`NormalHolds::start_friction`]: each particle's force left unbalanced
     /// by the triangles' contact forces, and the triangles' contact forces.

@@ -73,13 +73,12 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// static equilibrium; with the contact left to after the step it came to rest with forces
 /// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
 ///
-/// With PCG, a triangle spanning a collider at its start (resting on it, no corner within
-/// its thickness) is held at its contact point rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
+/// A triangle spanning a collider at its start (resting on it, no corner within its
+/// thickness) is held at its contact point rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
 /// the contact, and a strip hung off-centre over a thin rod slides off towards its long
 /// side. Its friction is pressed by the contact force that balances its corners' pushes. What
 /// the solve takes into a collider is still held at its corners (a triangle turning on a
-/// rod within a step rolls, and held at one point it cut into the rod), and so is
-/// everything with the sparse Cholesky, which takes no such rows.
+/// rod within a step rolls, and held at one point it cut into the rod).
 #[derive(Clone, Debug)]
 pub struct LinearlyImplicitEuler {
     /// The linear solver (PCG by default: tolerance, iteration cap).
@@ -108,9 +107,11 @@ impl Default for LinearlyImplicitEuler {
             rhs: vec![],
             dv: vec![],
             mask: vec![],
-            // Its triangles' holds carry their collider's friction, its particles' too.
+            // Its triangles' holds carry their collider's friction, its particles' too; a
+            // triangle spanning a collider is held at its contact point.
             holds: NormalHolds {
                 face_friction: true,
+                face_points: true,
                 ..NormalHolds::default()
             },
             last: PcgReport::default(),
@@ -359,9 +360,6 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for LinearlyImp
         }
         lin.total_forces(t, ps, &mut self.f0);
         self.holds.reserve_for(n);
-        // Resting triangles held at their contact points where the solver takes such rows
-        // (PCG), at their corners otherwise.
-        self.holds.face_points = self.solver.takes_rows();
         // Particles and triangles resting on colliders, or that the step would take into
         // them: held along the normals inside the solve. The particles' friction, pressed by
         // the forces at the step's start, is linearized at the start's velocities as the

@@ -623,10 +623,8 @@ impl LinearSolver {
     }
 
     /// [`LinearSolver::solve_filtered`] with constraints on combinations of particles as
-    /// well ([`PointRows`]: triangles held at their contact points), for the solvers that
-    /// take them ([`LinearSolver::takes_rows`]: PCG, [`Pcg::solve_constrained`]). The
-    /// Cholesky solve takes none; it solves with the particles' filters alone (the caller
-    /// holds the triangles at their corners instead).
+    /// well ([`PointRows`]: triangles held at their contact points):
+    /// [`Pcg::solve_constrained`] or [`SparseCholesky::solve_constrained`].
     pub fn solve_constrained(
         &mut self,
         a: &SpringMatrix,
@@ -638,13 +636,8 @@ impl LinearSolver {
     ) -> SolveReport {
         match self {
             LinearSolver::Pcg(p) => p.solve_constrained(a, b, x, mask, filters, rows),
-            LinearSolver::Cholesky(c) => c.solve_filtered(a, b, x, mask, filters),
+            LinearSolver::Cholesky(c) => c.solve_constrained(a, b, x, mask, filters, rows),
         }
-    }
-
-    /// Whether [`LinearSolver::solve_constrained`] holds its [`PointRows`].
-    pub fn takes_rows(&self) -> bool {
-        matches!(self, LinearSolver::Pcg(_))
     }
 
     /// Solves with the factorization of the last matrix solved (modified Newton); `None`

@@ -317,6 +317,35 @@ impl PointRows {
         }
     }
 
+    /// `y ← H⁻¹ y` ([`PointRows::set_metric`]'s `H = C' D⁻¹ C'ᵀ`; dropped rows' entries zero).
+    pub(crate) fn solve_h(&self, y: &mut [f64]) {
+        solve_envelope(&self.first, &self.start, &self.hl, &self.hkept, y);
+    }
+
+    /// How many rows, kept or dropped.
+    pub(crate) fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Row `r` seen through the filters (`C'`), and whether it is kept.
+    pub(crate) fn row(&self, r: usize) -> (&Row, bool) {
+        (&self.rows[r], self.kept[r])
+    }
+
+    /// What row `r` asks of `x` more: its prescribed value less `C x` (zero for a dropped
+    /// row).
+    pub(crate) fn shortfall(&self, r: usize, x: &[Vector]) -> f64 {
+        if !self.kept[r] {
+            return 0.0;
+        }
+        let (row, target) = &self.whole[r];
+        *target as f64
+            - row
+                .iter()
+                .map(|&(i, c)| c.dot(x[i as usize]) as f64)
+                .sum::<f64>()
+    }
+
     /// `v ← v − C'ᵀ G⁻¹ C' v`: `v`, already in the particles' filters' free directions, onto
     /// the rows' null space as well.
     pub fn project(&mut self, v: &mut [Vector]) {
