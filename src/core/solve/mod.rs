@@ -886,10 +886,11 @@ impl Pcg {
 
     /// [`Pcg::solve_filtered`] with constraints on combinations of particles as well
     /// ([`PointRows`], factored with these `filters`, and `x` on them): the residual, the
-    /// search directions and `A p` are projected onto the rows' null space too, so `x` keeps
-    /// the rows' prescribed values. The preconditioner is `P B P` (`P` the projector, `B` the
-    /// filtered block-Jacobi or multigrid), positive definite on that subspace (Gould,
-    /// Hribar and Nocedal 2001). With no rows this is [`Pcg::solve_filtered`], bit for bit.
+    /// search directions and `A p` are projected onto the rows' null space too (Gould,
+    /// Hribar and Nocedal 2001), so `x` keeps the rows' prescribed values. The preconditioner
+    /// `B` (the filtered block-Jacobi or multigrid) is wrapped as the constraint
+    /// preconditioner `Π B Πᵀ` ([`PointRows::precondition_in`]), positive definite on that
+    /// subspace. With no rows this is [`Pcg::solve_filtered`], bit for bit.
     ///
     /// # Panics
     /// As [`Pcg::solve_filtered`], and if a row's particle is not in the matrix.
@@ -1085,7 +1086,6 @@ impl Pcg {
             // Block-Jacobi without rows: fused, one pass over the vectors.
             let fused = jacobi && !has_rows;
             let [mut rz_new, rr] = if fused {
-                // Fused: one pass over the vectors.
                 sum_rows(partials, n, |rows| {
                     // SAFETY: disjoint ranges of `x`, `r` and `z`, which have the matrix's
                     // length.

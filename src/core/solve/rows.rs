@@ -1,5 +1,5 @@
-//! Constraints on combinations of particles for the filtered solves: a triangle resting on a
-//! collider at a point inside it is held there, not at its corners.
+//! Constraints on combinations of particles for the filtered solves: a triangle spanning a
+//! collider, touching it at a point inside it, is held there, not at its corners.
 //!
 //! Baraff and Witkin's filter (*Large steps in cloth simulation*, 1998, §5.3) constrains one
 //! particle at a time: a projector `Sᵢ` per particle. A triangle touching a thin rod at a
