@@ -1662,8 +1662,8 @@ impl Collider {
                     Some((on_tri, on_axis)) if (1e-9..r).contains(&on_tri.distance(on_axis)) => {
                         let off = on_tri - on_axis;
                         let len = off.length();
-                        let n = Vector::from_array((off / len).to_array().map(|c| c as Scalar));
-                        let point = Vector::from_array(on_tri.to_array().map(|c| c as Scalar));
+                        let n = (off / len).to_array().to_scalar();
+                        let point = on_tri.to_array().to_scalar();
                         Some((bary_of(point), point, n, (len - r) as Scalar))
                     }
                     _ => self.face_contact_parry(shape_pose, reach, tri),

@@ -74,9 +74,9 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 /// of hundreds of times a particle's weight unbalanced (docs/BENCHMARKS.md).
 ///
 /// A triangle spanning a collider at its start (resting on it, no corner within its
-/// thickness) is held at its contact point rather than at its corners ([`NormalHolds::face_points`], [`PointRows`]): it can tip about
-/// the contact, and a strip hung off-centre over a thin rod slides off towards its long
-/// side. Its friction is pressed by the contact force that balances its corners' pushes. What
+/// thickness) is held at its contact point rather than at its corners
+/// ([`NormalHolds::face_points`], [`PointRows`]): it can tip about the contact, and a strip
+/// hung off-centre over a thin rod slides off towards its long side. Its friction is pressed by the contact force that balances its corners' pushes. What
 /// the solve takes into a collider is still held at its corners (a triangle turning on a
 /// rod within a step rolls, and held at one point it cut into the rod).
 #[derive(Clone, Debug)]
@@ -189,7 +189,7 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
-        // Resting triangles held at their contact points (PCG takes such rows).
+        // Triangles spanning a collider held at their contact points.
         self.holds.face_points = true;
         lin.hold_faces(t, h, ps, &self.f, &self.mask, false, &mut self.holds);
         lin.assemble_damping(ps, h, a);

@@ -431,11 +431,7 @@ impl SparseCholesky {
             let f = an.free[i];
             if f != u32::MAX {
                 let f = 3 * f as usize;
-                *xi += Vector::new(
-                    self.schur_dx[f] as Scalar,
-                    self.schur_dx[f + 1] as Scalar,
-                    self.schur_dx[f + 2] as Scalar,
-                );
+                *xi += [self.schur_dx[f], self.schur_dx[f + 1], self.schur_dx[f + 2]].to_scalar();
             }
         }
         report

@@ -739,7 +739,16 @@ impl Preconditioner {
     }
 }
 
-/// `inv[i] ← diag[i]⁻¹`, the identity where a block is singular or not finite.
+/// `d⁻¹`, the identity where the block is singular or not finite.
+pub(crate) fn invert_block(d: &Matrix3) -> Matrix3 {
+    if d.determinant().is_normal() {
+        d.inverse()
+    } else {
+        Matrix3::IDENTITY
+    }
+}
+
+/// `inv[i] ← diag[i]⁻¹` ([`invert_block`]).
 fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
     inv.resize(diag.len(), Matrix3::IDENTITY);
     let out = SharedMut(inv.as_mut_ptr());
@@ -747,12 +756,7 @@ fn invert_blocks(diag: &[Matrix3], inv: &mut Vec<Matrix3>) {
         // SAFETY: disjoint ranges of `inv`, which has the diagonal's length.
         let inv = unsafe { out.slice(rows.clone()) };
         for (inv, d) in inv.iter_mut().zip(&diag[rows]) {
-            let det = d.determinant();
-            *inv = if det.is_normal() {
-                d.inverse()
-            } else {
-                Matrix3::IDENTITY
-            };
+            *inv = invert_block(d);
         }
     });
 }

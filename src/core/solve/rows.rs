@@ -109,17 +109,11 @@ impl PointRows {
             )
         };
         self.whole.sort_unstable_by_key(key);
-        // The rows seen through the filters (sorted by particle).
-        let filter = |i: u32| {
-            filters
-                .binary_search_by_key(&i, |f| f.0)
-                .ok()
-                .map(|f| filters[f].1)
-        };
+        // The rows seen through the filters.
         self.rows.extend(
             self.whole
                 .iter()
-                .map(|(row, _)| row.map(|(i, c)| (i, filter(i).map_or(c, |s| s * c)))),
+                .map(|(row, _)| row.map(|(i, c)| (i, filter_of(filters, i).map_or(c, |s| s * c)))),
         );
         // Which rows share particles: (particle, row) sorted.
         self.by_particle.clear();
@@ -155,31 +149,15 @@ impl PointRows {
         }
         self.l.clear();
         self.l.resize(len as usize, 0.0);
-        // G's envelope entries, then the factor in place, row by row.
-        let dotrow = |p: &Row, q: &Row| -> f64 {
-            let mut s = 0.0f64;
-            for &(i, c) in p {
-                for &(j, d) in q {
-                    if i == j {
-                        s += c.dot(d) as f64;
-                    }
-                }
-            }
-            s
-        };
-        for r in 0..k {
-            let (f, s) = (self.first[r] as usize, self.start[r] as usize);
-            for c in f..=r {
-                self.l[s + c - f] = dotrow(&self.rows[r], &self.rows[c]);
-            }
-        }
-        // Kept: rows that are not all but taken by the filters, and independent of the
-        // kept rows before them, each against its length before the filters.
+        // G's envelope entries, then the factor in place, row by row. Kept: rows that are
+        // not all but taken by the filters, and independent of the kept rows before them,
+        // each against its length before the filters.
+        let rows = &self.rows;
+        fill_envelope(&self.first, &self.start, &mut self.l, |r, c| {
+            row_product(&rows[r], &rows[c], |_| Matrix3::IDENTITY)
+        });
         self.kept.clear();
-        self.kept.extend(self.whole.iter().map(|(row, _)| {
-            let whole: f64 = row.iter().map(|(_, c)| c.length_squared() as f64).sum();
-            whole > 0.0
-        }));
+        self.kept.resize(k, true);
         factor_envelope_relative(&self.first, &self.start, &mut self.l, &mut self.kept, |r| {
             self.whole[r]
                 .0
@@ -210,21 +188,11 @@ impl PointRows {
     /// the inverse diagonal blocks `diag` of the system at the rows' corners, filtered
     /// (`S D⁻¹ S`) where `filters` hold a corner, and factors `H = C' D⁻¹ C'ᵀ`.
     pub fn set_metric(&mut self, diag: &[Matrix3], filters: &[(u32, Matrix3)]) {
-        let k = self.rows.len();
         self.dinv.clear();
         for row in &self.rows {
             self.dinv.push(row.map(|(i, _)| {
-                let d = diag[i as usize];
-                let det = d.determinant();
-                let inv = if det.is_normal() {
-                    d.inverse()
-                } else {
-                    Matrix3::IDENTITY
-                };
-                match filters.binary_search_by_key(&i, |f| f.0) {
-                    Ok(f) => filters[f].1 * inv * filters[f].1,
-                    Err(_) => inv,
-                }
+                let inv = super::invert_block(&diag[i as usize]);
+                filter_of(filters, i).map_or(inv, |s| s * inv * s)
             }));
         }
         self.hl.clear();
@@ -232,20 +200,9 @@ impl PointRows {
         self.hkept.clear();
         self.hkept.extend_from_slice(&self.kept);
         let (rows, dinv) = (&self.rows, &self.dinv);
-        for r in 0..k {
-            let (f, s) = (self.first[r] as usize, self.start[r] as usize);
-            for c in f..=r {
-                let mut sum = 0.0f64;
-                for (a, &(i, ci)) in rows[r].iter().enumerate() {
-                    for &(j, cj) in &rows[c] {
-                        if i == j {
-                            sum += ci.dot(dinv[r][a] * cj) as f64;
-                        }
-                    }
-                }
-                self.hl[s + c - f] = sum;
-            }
-        }
+        fill_envelope(&self.first, &self.start, &mut self.hl, |r, c| {
+            row_product(&rows[r], &rows[c], |a| dinv[r][a])
+        });
         factor_envelope(&self.first, &self.start, &mut self.hl, &mut self.hkept);
     }
 
@@ -360,6 +317,39 @@ impl PointRows {
         }
         self.solve_g();
         self.add_rows(v);
+    }
+}
+
+/// Particle `i`'s projector among `filters` (sorted by particle), if it has one.
+fn filter_of(filters: &[(u32, Matrix3)], i: u32) -> Option<Matrix3> {
+    filters
+        .binary_search_by_key(&i, |f| f.0)
+        .ok()
+        .map(|f| filters[f].1)
+}
+
+/// `pᵀ M q` of two rows over the particles they share, `M` block-diagonal: `m(a)` the block
+/// at `p`'s corner `a` (`G`'s entries with the identity, `H`'s with `D⁻¹`).
+fn row_product(p: &Row, q: &Row, m: impl Fn(usize) -> Matrix3) -> f64 {
+    let mut sum = 0.0f64;
+    for (a, &(i, c)) in p.iter().enumerate() {
+        for &(j, d) in q {
+            if i == j {
+                sum += c.dot(m(a) * d) as f64;
+            }
+        }
+    }
+    sum
+}
+
+/// The entries `entry(r, c)` of a symmetric matrix's envelope (`first`, `start` as in
+/// [`factor_envelope`]) into `l`, row by row.
+fn fill_envelope(first: &[u32], start: &[u32], l: &mut [f64], entry: impl Fn(usize, usize) -> f64) {
+    for r in 0..first.len() {
+        let (f, s) = (first[r] as usize, start[r] as usize);
+        for c in f..=r {
+            l[s + c - f] = entry(r, c);
+        }
     }
 }
 
