@@ -194,24 +194,33 @@ fn frames_allocate_nothing_after_the_first() {
             "{kind} ({solver:?}), tets on the ground: {n} allocations in 30 frames"
         );
     }
-    // A cloth hung over a rod thinner than its cells, linearly implicit Euler with PCG: the
-    // triangles spanning the rod held at their contact points, those the trial takes in at
-    // their corners (their contact in the rod the crate's own, not parry's penetration
-    // query, which allocates).
-    let scene = common::cloth_on_a_rod(0.01, 0.3);
-    let (model, state) = scene.build().unwrap();
-    let cfg = DriverConfig {
-        integrator: IntegratorKind::LinearlyImplicitEuler,
-        policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
-        solver: SolverChoice::Pcg,
-        ..Default::default()
-    };
-    let mut sim = Simulation::new(model, state, cfg);
-    for _ in 0..90 {
-        sim.advance_frame().unwrap();
+    // A cloth hung over a rod thinner than its cells: the triangles spanning the rod held at
+    // their contact points, those the trial takes in at their corners (their contact in the
+    // rod the crate's own, not parry's penetration query, which allocates). Linearly implicit
+    // Euler with PCG, backward Euler with PCG and with the Cholesky (modified Newton: the
+    // rows' Schur complement on a reused factor too).
+    for (integrator, solver) in [
+        (IntegratorKind::LinearlyImplicitEuler, SolverChoice::Pcg),
+        (IntegratorKind::BackwardEuler, SolverChoice::Pcg),
+        (IntegratorKind::BackwardEuler, SolverChoice::Cholesky),
+    ] {
+        let (model, state) = common::cloth_on_a_rod(0.01, 0.3).build().unwrap();
+        let cfg = DriverConfig {
+            integrator,
+            policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
+            solver,
+            ..Default::default()
+        };
+        let mut sim = Simulation::new(model, state, cfg);
+        for _ in 0..90 {
+            sim.advance_frame().unwrap();
+        }
+        let n = allocations_in(&mut sim, 30);
+        assert_eq!(
+            n, 0,
+            "{integrator:?} ({solver:?}), a cloth on a thin rod: {n} allocations in 30 frames"
+        );
     }
-    let n = allocations_in(&mut sim, 30);
-    assert_eq!(n, 0, "a cloth on a thin rod: {n} allocations in 30 frames");
     // The rows, their factors, the friction's fit of the contact forces and the constrained
     // solve, with either preconditioner, on their own.
     let mut scene = build::cloth(&build::ClothParams {

@@ -726,6 +726,50 @@ fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
             xr[q]
         );
     }
+    // A Newton direction from a point on the constraints (backward Euler's): every value
+    // zero, `C d = 0` (`zero_targets`), another right-hand side, solved from zero by PCG and
+    // by the Cholesky's last factor (modified Newton, `resolve_constrained`).
+    holds.rows.zero_targets();
+    let b2: Vec<Vector> = (0..n).map(|_| unit() * 0.8).collect();
+    let mut kkt = vec![vec![0.0; m]; m];
+    let mut rhs = vec![0.0; m];
+    for i in 0..3 * n {
+        kkt[i][..3 * n].copy_from_slice(&dense[i]);
+        rhs[i] = b2[i / 3][i % 3] as f64;
+    }
+    for (q, (v, _)) in k.iter().enumerate() {
+        for c in 0..3 * n {
+            kkt[3 * n + q][c] = v[c];
+            kkt[c][3 * n + q] = v[c];
+        }
+    }
+    let dr = dense_solve(kkt, rhs);
+    let scale = dr[..3 * n].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut pcg = Pcg::new(tol as Scalar, 200);
+    let mut d = vec![Vector::ZERO; n];
+    let rep = pcg.solve_constrained(&a, &b2, &mut d, &mask, &holds.filters, &mut holds.rows);
+    assert!(rep.converged, "direction, PCG: {rep:?}");
+    let mut chol = SparseCholesky::new();
+    let mut e = vec![Vector::ZERO; n];
+    chol.solve_filtered(&a, &b, &mut e, &mask, &holds.filters);
+    e.fill(Vector::ZERO);
+    let rep = chol
+        .resolve_constrained(&a, &b2, &mut e, &mask, &holds.filters, &mut holds.rows)
+        .expect("the factor of the same matrix and filters");
+    assert!(rep.converged && !rep.failed, "direction, Cholesky: {rep:?}");
+    for q in 0..3 * n {
+        let (p, c) = (d[q / 3][q % 3] as f64, e[q / 3][q % 3] as f64);
+        assert!(
+            (p - dr[q]).abs() <= 100.0 * tol * scale,
+            "direction, PCG, dof {q}: {p} vs {}",
+            dr[q]
+        );
+        assert!(
+            (c - dr[q]).abs() <= direct * scale,
+            "direction, Cholesky, dof {q}: {c} vs {}",
+            dr[q]
+        );
+    }
 }
 
 fn cloth32() -> (ParticleModel, ParticleState) {

@@ -2002,8 +2002,7 @@ pub struct NormalHolds {
     pub rows: PointRows,
     /// Whether triangles spanning a collider are held at their contact points (rows of the
     /// solve on combinations of particles: [`PointRows`]) rather than at each corner along
-    /// the normal. Linearly implicit Euler and the trapezoid with implicit damping set it;
-    /// backward Euler leaves it off.
+    /// the normal. The implicit methods set it.
     pub face_points: bool,
     /// Scratch of [`NormalHolds::start_friction`]: each particle's force left unbalanced
     /// by the triangles' contact forces, and the triangles' contact forces.
@@ -2321,7 +2320,8 @@ impl NormalHolds {
     }
 
     /// The triangles' holds `raw[from..]` keep their collider's friction only where the step
-    /// gives triangles friction ([`NormalHolds::face_friction`]); otherwise it is set to zero.
+    /// gives triangles friction ([`NormalHolds::face_friction`]); otherwise it is set to zero
+    /// (the triangles held at their contact points' too).
     pub fn face_friction_from(&mut self, from: usize) {
         if self.face_friction {
             return;
@@ -2411,8 +2411,14 @@ impl NormalHolds {
             self.contact.push((first, vp, mu));
         }
         // The triangles held at their contact points: `Σ wⱼ n · vⱼ = n · v_c` at the step's
-        // end, on the free corners' unknowns (the others' end velocities known).
+        // end, on the free corners' unknowns (the others' end velocities known). A body that
+        // has such holds gets room for as many rows as it may have triangles held
+        // (`reserve_for`'s two a particle), so the steps that follow allocate nothing.
         self.rows.clear();
+        if !self.faces.is_empty() {
+            self.rows
+                .reserve_for(self.faces.capacity().max(2 * x.len()));
+        }
         for f in &self.faces {
             let n = f.normal;
             let mut target = n.dot(f.velocity);

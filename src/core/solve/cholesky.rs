@@ -332,6 +332,39 @@ impl SparseCholesky {
         if report.failed || rows.is_empty() {
             return report;
         }
+        self.correct_for_rows(a, x, filters, rows, report)
+    }
+
+    /// [`SparseCholesky::resolve`] with the rows as well, as
+    /// [`SparseCholesky::solve_constrained`] takes them (the factor of the last matrix, and
+    /// its Schur complement's conjugate gradients again).
+    pub fn resolve_constrained(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+        rows: &mut PointRows,
+    ) -> Option<PcgReport> {
+        let report = self.resolve(a, b, x, mask, filters)?;
+        if report.failed || rows.is_empty() {
+            return Some(report);
+        }
+        Some(self.correct_for_rows(a, x, filters, rows, report))
+    }
+
+    /// The range-space correction of [`SparseCholesky::solve_constrained`]:
+    /// `x ← x + Â⁻¹ C'ᵀ λ` with the factor in place, `x` the filtered solve's answer whose
+    /// `report` it returns (or a failure).
+    fn correct_for_rows(
+        &mut self,
+        a: &SpringMatrix,
+        x: &mut [Vector],
+        filters: &[(u32, Matrix3)],
+        rows: &mut PointRows,
+        report: PcgReport,
+    ) -> PcgReport {
         rows.set_metric(&a.diag, filters);
         let Some(an) = self.analysis.as_mut() else {
             return failed();

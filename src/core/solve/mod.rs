@@ -657,6 +657,23 @@ impl LinearSolver {
         }
     }
 
+    /// [`LinearSolver::resolve`] with constraints on combinations of particles as well
+    /// ([`SparseCholesky::resolve_constrained`]).
+    pub fn resolve_constrained(
+        &mut self,
+        a: &SpringMatrix,
+        b: &[Vector],
+        x: &mut [Vector],
+        mask: &[Scalar],
+        filters: &[(u32, Matrix3)],
+        rows: &mut PointRows,
+    ) -> Option<SolveReport> {
+        match self {
+            LinearSolver::Pcg(_) => None,
+            LinearSolver::Cholesky(c) => c.resolve_constrained(a, b, x, mask, filters, rows),
+        }
+    }
+
     /// A short name for tables.
     pub fn name(&self) -> &'static str {
         match self {

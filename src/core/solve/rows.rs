@@ -60,6 +60,26 @@ impl PointRows {
     /// times its length is dropped.
     const DISTINCT: f64 = 0.25;
 
+    /// Room for `k` rows (and an envelope eight entries a row wide), so that the solves that
+    /// follow allocate nothing as contacts come and go; grows only.
+    pub fn reserve_for(&mut self, k: usize) {
+        fn room<T>(v: &mut Vec<T>, want: usize) {
+            v.reserve(want.saturating_sub(v.len()));
+        }
+        room(&mut self.whole, k);
+        room(&mut self.rows, k);
+        room(&mut self.first, k);
+        room(&mut self.start, k);
+        room(&mut self.kept, k);
+        room(&mut self.hkept, k);
+        room(&mut self.y, k);
+        room(&mut self.dinv, k);
+        room(&mut self.by_particle, 3 * k);
+        room(&mut self.saved, 3 * k);
+        room(&mut self.l, 8 * k);
+        room(&mut self.hl, 8 * k);
+    }
+
     /// Forgets the rows.
     pub fn clear(&mut self) {
         self.rows.clear();
@@ -177,6 +197,15 @@ impl PointRows {
         }
         self.solve_g();
         self.add_rows(x);
+    }
+
+    /// Makes the rows homogeneous, `C x = 0`, keeping their factor: the solves that follow
+    /// give corrections to a point already on the constraints (Newton's directions, from
+    /// velocities [`PointRows::factor`] put there), which must keep `C d = 0`.
+    pub fn zero_targets(&mut self) {
+        for (_, target) in &mut self.whole {
+            *target = 0.0;
+        }
     }
 
     /// `y ← G⁻¹ y` by the factor (dropped rows' entries zero).
