@@ -1633,7 +1633,15 @@ impl Collider {
                 let o = d(pose.origin);
                 let local = tri.map(|p| rot.inverse() * (d(p) - o));
                 let Some((on_tri, on_box)) = triangle_box_closest(local, half.as_dvec3()) else {
-                    return self.face_contact_parry(shape_pose, reach, tri);
+                    // Overlapping: the least translation out (what parry's penetration
+                    // query, EPA, answers, without its allocations).
+                    let Some((p, n, depth)) = triangle_box_penetration(local, half.as_dvec3())
+                    else {
+                        return self.face_contact_parry(shape_pose, reach, tri);
+                    };
+                    let n = (rot * n).to_array().to_scalar();
+                    let point = (rot * p + o).to_array().to_scalar();
+                    return Some((bary_of(point), point, n, -depth as Scalar));
                 };
                 let off = on_tri - on_box;
                 let dist = off.length();
@@ -1781,6 +1789,110 @@ fn triangle_box_closest(t: [glam::DVec3; 3], h: glam::DVec3) -> Option<(glam::DV
         }
     }
     Some((best.1, best.2))
+}
+
+/// How triangle `t` (a segment when `t[1] == t[2]`), overlapping the box of half extents `h`
+/// centred at the origin, is best pushed out of it, all in the box's frame: `(p, n, δ)`, the
+/// point `p` of the triangle that moved by `δ n` touches the box's surface, `δ` the least
+/// translation that separates them (the penetration depth) and `n` its unit direction.
+/// Between convex polyhedra that depth is the least overlap of their projections on the
+/// separating-axis candidates: the box's three axes, the triangle's normal and the nine
+/// products of an edge of each (Ericson, *Real-Time Collision Detection*, §5.2.1; the
+/// faces of their Minkowski difference have those normals). The point is the middle of
+/// where the triangle's deepest feature along `−n` (a corner, an edge or the whole
+/// triangle), moved by `δ n`, lies on the box's (clipped to the box, a millionth of its
+/// size around it), or that feature's middle should round-off leave nothing. `None` when
+/// they do not overlap or the triangle has no extent. This is what parry's penetration
+/// query (EPA) answers, without its allocations.
+fn triangle_box_penetration(
+    t: [glam::DVec3; 3],
+    h: glam::DVec3,
+) -> Option<(glam::DVec3, glam::DVec3, f64)> {
+    use glam::DVec3;
+    let e = [t[1] - t[0], t[2] - t[1], t[0] - t[2]];
+    let scale = h
+        .max_element()
+        .max(e.iter().map(|v| v.length()).fold(0.0, f64::max));
+    if !(scale > 0.0 && scale.is_finite()) {
+        return None;
+    }
+    // The least overlap over the candidates, in a fixed order (the box's faces first).
+    let mut best: Option<(f64, DVec3)> = None;
+    let mut try_axis = |a: DVec3| -> bool {
+        let len = a.length();
+        if len <= 1e-9 * scale * scale {
+            return true;
+        }
+        let a = a / len;
+        let p = t.map(|v| v.dot(a));
+        let r = h.dot(a.abs());
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        // Pushed along `a`, the triangle must go `r − lo`; along `−a`, `hi + r`.
+        for (depth, dir) in [(r - lo, a), (hi + r, -a)] {
+            if depth <= 0.0 {
+                return false;
+            }
+            if best.is_none_or(|(d, _)| depth < d) {
+                best = Some((depth, dir));
+            }
+        }
+        true
+    };
+    let mut overlap = [DVec3::X, DVec3::Y, DVec3::Z]
+        .into_iter()
+        .all(&mut try_axis);
+    overlap = overlap && (t[1] == t[2] || try_axis(e[0].cross(e[1])));
+    for a in [DVec3::X, DVec3::Y, DVec3::Z] {
+        for side in e {
+            overlap = overlap && try_axis(a.cross(side));
+        }
+    }
+    let (depth, n) = best.filter(|_| overlap)?;
+    // The triangle's deepest feature along `−n`, moved out by `δ n`, clipped to the box.
+    let low = t
+        .map(|v| v.dot(n))
+        .into_iter()
+        .fold(f64::INFINITY, f64::min);
+    let tol = 1e-9 * scale;
+    let corners = if t[1] == t[2] { 2 } else { 3 };
+    let mut poly = [DVec3::ZERO; 9];
+    let mut len = 0;
+    for &v in &t[..corners] {
+        if v.dot(n) <= low + tol {
+            poly[len] = v + n * depth;
+            len += 1;
+        }
+    }
+    let feature_mid = poly[..len].iter().sum::<DVec3>() / len as f64 - n * depth;
+    let grow = 1e-6 * scale;
+    for axis in 0..3 {
+        for side in [1.0, -1.0] {
+            // Keep `side x_axis ≤ h_axis + grow` (Sutherland–Hodgman).
+            let inside = |p: DVec3| side * p[axis] - (h[axis] + grow);
+            let mut out = [DVec3::ZERO; 9];
+            let mut m = 0;
+            for k in 0..len {
+                let (a, b) = (poly[k], poly[(k + 1) % len]);
+                let (da, db) = (inside(a), inside(b));
+                if da <= 0.0 {
+                    out[m] = a;
+                    m += 1;
+                }
+                // A segment is closed by its way back: its crossing is taken once.
+                if (da <= 0.0) != (db <= 0.0) && (len > 2 || k == 0) && m < 9 {
+                    out[m] = a + (b - a) * (da / (da - db));
+                    m += 1;
+                }
+            }
+            poly = out;
+            len = m;
+            if len == 0 {
+                return Some((feature_mid, n, depth));
+            }
+        }
+    }
+    let mid = poly[..len].iter().sum::<DVec3>() / len as f64;
+    Some((mid - n * depth, n, depth))
 }
 
 /// The point of capsule `cap`'s axis nearest `p` (in its frame), the offset from it to `p`
@@ -3160,6 +3272,88 @@ mod tests {
             }
         }
         assert!(met > 1000, "{met} contacts");
+    }
+
+    /// The box's own penetration (the least translation out, by separating axes) against
+    /// parry's penetration query (EPA) and an independent check: over random triangles and
+    /// segments overlapping a box, moved by the depth along the normal (and a millionth
+    /// more) the feature no longer overlaps the box, by the separating-axis test; the point
+    /// is on the feature and, moved so, on the box's surface; and wherever parry's
+    /// translation takes the feature out, the depth is parry's to `f32` round-off (6.5e-8 m
+    /// at most), never more (ours is the least). In 27 of 12,204 overlaps parry's
+    /// translation left the feature in the box (EPA stopping short: a triangle wholly inside
+    /// at 0.0933 m where 0.0994 is the least that takes it out).
+    #[test]
+    fn a_box_penetration_is_the_least_translation_out() {
+        use glam::DVec3;
+        let mut rng = crate::math::test_rng(0x005e_ed0f_b0c5_u64);
+        let mut rnd = move || rng();
+        let h = DVec3::new(0.3, 0.1, 0.2);
+        let cuboid = parry3d::shape::Cuboid::new(h.as_vec3());
+        let (mut met, mut worst, mut short) = (0, 0.0f64, 0);
+        for k in 0..20_000 {
+            let size = if k % 3 == 0 { 0.05 } else { 0.4 };
+            let centre = DVec3::new(0.35 * rnd(), 0.15 * rnd(), 0.25 * rnd());
+            let mut t = [0; 3].map(|_| centre + DVec3::new(rnd(), rnd(), rnd()) * size);
+            if k % 5 == 0 {
+                t[2] = t[1];
+            }
+            if !triangle_box_overlap(t, h) {
+                continue;
+            }
+            let Some((p, n, depth)) = triangle_box_penetration(t, h) else {
+                panic!("{t:?}: overlapping, but no penetration");
+            };
+            met += 1;
+            assert!(
+                (n.length() - 1.0).abs() < 1e-12 && depth > 0.0,
+                "{n} {depth}"
+            );
+            // Out: moved a little past the depth, apart.
+            let out = t.map(|v| v + n * (depth * (1.0 + 1e-6) + 1e-9));
+            assert!(
+                !triangle_box_overlap(out, h),
+                "{t:?}: still in after {depth} along {n}"
+            );
+            // The point: on the feature, and moved out, on the box's surface.
+            let b = crate::core::self_contact::closest_on_triangle(p, t[0], t[1], t[2]);
+            let on = t[0] * b[0] + t[1] * b[1] + t[2] * b[2];
+            assert!(on.distance(p) < 1e-9, "{t:?}: {p} off the feature");
+            let foot = p + n * depth;
+            let gap = (foot.abs() - h).max_element();
+            assert!(
+                gap.abs() < 1e-6,
+                "{t:?}: {foot} is {gap} off the box's surface"
+            );
+            // parry's penetration query, in `f32`.
+            let f = t.map(|v| v.as_vec3());
+            let feature: Box<dyn parry3d::shape::Shape> = if t[1] == t[2] {
+                Box::new(parry3d::shape::Segment::new(f[0], f[1]))
+            } else {
+                Box::new(parry3d::shape::Triangle::new(f[0], f[1], f[2]))
+            };
+            let id = Pose3::IDENTITY;
+            // Where parry's translation takes the feature out, ours is no longer than it.
+            // (EPA stops short on some features deep in the box: its translation leaves
+            // them in.)
+            if let Ok(Some(c)) = parry3d::query::contact(&id, &*feature, &id, &cuboid, 0.0) {
+                let (theirs, dir) = (-c.dist as f64, -c.normal1.as_dvec3());
+                let moved = t.map(|v| v + dir * (theirs * (1.0 + 1e-5) + 1e-6));
+                if triangle_box_overlap(moved, h) {
+                    short += 1;
+                } else {
+                    assert!(
+                        depth <= theirs + 1e-5,
+                        "{t:?}: {depth} against parry's {theirs}"
+                    );
+                    worst = worst.max(theirs - depth);
+                }
+            }
+        }
+        println!("{met} overlapping; parry's depth at most {worst:.2e} more, short in {short}");
+        assert!(met > 5_000, "{met} overlapping");
+        // The same depth to `f32` round-off, where parry's is right.
+        assert!(worst < 1e-6, "parry's depth {worst} more than ours");
     }
 
     /// A capsule's own particle contact (the nearest point of its axis) is parry's projection
