@@ -2523,14 +2523,12 @@ impl NormalHolds {
             self.contact.push((first, vp, mu));
         }
         // The triangles held at their contact points: `Σ wⱼ n · vⱼ = n · v_c` at the step's
-        // end, on the free corners' unknowns (the others' end velocities known). A body that
-        // has such holds gets room for as many rows as it may have triangles held
-        // (`reserve_for`'s two a particle), so the steps that follow allocate nothing.
+        // end, on the free corners' unknowns (the others' end velocities known). Room for
+        // four times as many rows as there are triangles now: the rows of a body resting on
+        // a collider come and go without allocating, and the room stays a few times its
+        // contact, not its size.
         self.rows.clear();
-        if !self.faces.is_empty() {
-            self.rows
-                .reserve_for(self.faces.capacity().max(2 * x.len()));
-        }
+        self.rows.reserve_for(4 * self.faces.len());
         for f in &self.faces {
             let n = f.normal;
             let mut target = n.dot(f.velocity);

@@ -61,7 +61,7 @@ impl PointRows {
     const DISTINCT: f64 = 0.25;
 
     /// Room for `k` rows (and an envelope eight entries a row wide), so that the solves that
-    /// follow allocate nothing as contacts come and go; grows only.
+    /// follow allocate nothing as contacts come and go; grows only (nothing for `k = 0`).
     pub fn reserve_for(&mut self, k: usize) {
         fn room<T>(v: &mut Vec<T>, want: usize) {
             v.reserve(want.saturating_sub(v.len()));
