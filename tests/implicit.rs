@@ -674,21 +674,25 @@ fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
             .collect();
         row(&parts, *speed as f64);
     }
-    let m = 3 * n + k.len();
-    let mut kkt = vec![vec![0.0; m]; m];
-    let mut rhs = vec![0.0; m];
-    for i in 0..3 * n {
-        kkt[i][..3 * n].copy_from_slice(&dense[i]);
-        rhs[i] = b[i / 3][i % 3] as f64;
-    }
-    for (q, (v, value)) in k.iter().enumerate() {
-        for c in 0..3 * n {
-            kkt[3 * n + q][c] = v[c];
-            kkt[c][3 * n + q] = v[c];
+    // `[A Kᵀ; K 0] [x; λ] = [b; k]` solved densely, with the constraints' values or zero.
+    let kkt_solve = |b: &[Vector], values: bool| {
+        let m = 3 * n + k.len();
+        let mut kkt = vec![vec![0.0; m]; m];
+        let mut rhs = vec![0.0; m];
+        for i in 0..3 * n {
+            kkt[i][..3 * n].copy_from_slice(&dense[i]);
+            rhs[i] = b[i / 3][i % 3] as f64;
         }
-        rhs[3 * n + q] = *value;
-    }
-    let xr = dense_solve(kkt, rhs);
+        for (q, (v, value)) in k.iter().enumerate() {
+            for c in 0..3 * n {
+                kkt[3 * n + q][c] = v[c];
+                kkt[c][3 * n + q] = v[c];
+            }
+            rhs[3 * n + q] = if values { *value } else { 0.0 };
+        }
+        dense_solve(kkt, rhs)
+    };
+    let xr = kkt_solve(&b, true);
     let scale = xr[..3 * n].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let tol = if F64 { 1e-10 } else { 1e-5 };
     for pre in [Preconditioner::BlockJacobi, Preconditioner::Multigrid] {
@@ -731,19 +735,7 @@ fn point_rows_solve_equals_the_lagrange_multiplier_solve() {
     // by the Cholesky's last factor (modified Newton, `resolve_constrained`).
     holds.rows.zero_targets();
     let b2: Vec<Vector> = (0..n).map(|_| unit() * 0.8).collect();
-    let mut kkt = vec![vec![0.0; m]; m];
-    let mut rhs = vec![0.0; m];
-    for i in 0..3 * n {
-        kkt[i][..3 * n].copy_from_slice(&dense[i]);
-        rhs[i] = b2[i / 3][i % 3] as f64;
-    }
-    for (q, (v, _)) in k.iter().enumerate() {
-        for c in 0..3 * n {
-            kkt[3 * n + q][c] = v[c];
-            kkt[c][3 * n + q] = v[c];
-        }
-    }
-    let dr = dense_solve(kkt, rhs);
+    let dr = kkt_solve(&b2, false);
     let scale = dr[..3 * n].iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let mut pcg = Pcg::new(tol as Scalar, 200);
     let mut d = vec![Vector::ZERO; n];

@@ -2135,10 +2135,7 @@ impl NormalHolds {
     /// Room for the holds of `n` particles (two raw holds each), so that steps allocate
     /// nothing as contacts come and go; grows only.
     pub fn reserve_for(&mut self, n: usize) {
-        // `reserve` asks for room beyond the length and does nothing where there is room.
-        fn room<T>(v: &mut Vec<T>, want: usize) {
-            v.reserve(want.saturating_sub(v.len()));
-        }
+        use crate::core::room;
         room(&mut self.raw, 2 * n);
         room(&mut self.drag, 2 * n);
         room(&mut self.linearized, 2 * n);

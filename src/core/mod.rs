@@ -22,3 +22,10 @@ pub mod self_contact;
 pub mod solve;
 pub mod study;
 pub mod tear;
+
+/// Room in `v` for `want` entries in all (`Vec::reserve` asks for room beyond the length):
+/// nothing is allocated where there is room already. The scratch lists that steps keep grow
+/// so, once, to what their body may need.
+pub(crate) fn room<T>(v: &mut Vec<T>, want: usize) {
+    v.reserve(want.saturating_sub(v.len()));
+}

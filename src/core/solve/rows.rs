@@ -63,9 +63,7 @@ impl PointRows {
     /// Room for `k` rows (and an envelope eight entries a row wide), so that the solves that
     /// follow allocate nothing as contacts come and go; grows only (nothing for `k = 0`).
     pub fn reserve_for(&mut self, k: usize) {
-        fn room<T>(v: &mut Vec<T>, want: usize) {
-            v.reserve(want.saturating_sub(v.len()));
-        }
+        use crate::core::room;
         room(&mut self.whole, k);
         room(&mut self.rows, k);
         room(&mut self.first, k);
