@@ -786,8 +786,8 @@ impl Collider {
     /// with a [`Response`] holds nothing, as in [`Collider::hold`]: its body would never feel
     /// the constraint's force.
     ///
-    /// With `at_points`, a triangle spanning the collider (no corner within the thickness of
-    /// it) is held at its contact point instead ([`FaceHold`], pushed there; nothing onto
+    /// A triangle spanning the collider (no corner within the thickness of it) is held at
+    /// its contact point instead ([`FaceHold`], pushed onto `at_points`; nothing onto
     /// `out`): if the point is not moving away from
     /// the collider and the free corners' forces push it towards it (`Σ wⱼ fⱼ · n / mⱼ ≤ 0`),
     /// its velocity along the normal is held, and the triangle stays free to tip about it.
@@ -809,7 +809,7 @@ impl Collider {
         inv_mass: &[Scalar],
         mask: &[Scalar],
         out: &mut Vec<(u32, Vector, Vector, Scalar)>,
-        mut at_points: Option<&mut Vec<FaceHold>>,
+        at_points: &mut Vec<FaceHold>,
     ) {
         if self.response.is_some() || faces.is_empty() || !self.needs_faces(edge) {
             return;
@@ -844,7 +844,7 @@ impl Collider {
             let spans = ids
                 .iter()
                 .all(|&i| self.contact(&pose, thick, x[i]).is_none());
-            if let Some(holds) = at_points.as_deref_mut().filter(|_| spans) {
+            if spans {
                 // Held at the contact point: its velocity along the normal, and its
                 // acceleration by the free corners' forces.
                 let free = ids.map(|i| inv_mass[i] != 0.0 && mask[i] != 0.0);
@@ -857,7 +857,7 @@ impl Collider {
                     }
                 }
                 if free.iter().any(|&f| f) && vn <= 0.0 && an <= 0.0 {
-                    holds.push(FaceHold {
+                    at_points.push(FaceHold {
                         ids: ids.map(|i| i as u32),
                         weights: bary,
                         free,
@@ -2107,15 +2107,11 @@ pub struct NormalHolds {
     pub trial: Vec<Vector>,
     /// The last round's answer, kept while the next is solved (scratch).
     pub kept: Vec<Vector>,
-    /// Triangles held at their contact points, where the step holds them so
-    /// ([`NormalHolds::face_points`]); their corners are then not in [`NormalHolds::raw`].
+    /// Triangles held at their contact points (those spanning a collider:
+    /// [`Collider::hold_faces`]); their corners are then not in [`NormalHolds::raw`].
     pub faces: Vec<FaceHold>,
     /// The rows [`NormalHolds::settle`] made of [`NormalHolds::faces`], for the solve.
     pub rows: PointRows,
-    /// Whether triangles spanning a collider are held at their contact points (rows of the
-    /// solve on combinations of particles: [`PointRows`]) rather than at each corner along
-    /// the normal. The implicit methods set it.
-    pub face_points: bool,
     /// Scratch of [`NormalHolds::start_friction`]: each particle's force left unbalanced
     /// by the triangles' contact forces, and the triangles' contact forces.
     pub(crate) pressed: Vec<Vector>,

@@ -590,7 +590,7 @@ impl Linearization for ParticleModel {
                 self.inv_mass(),
                 mask,
                 &mut holds.raw,
-                holds.face_points.then_some(&mut holds.faces),
+                &mut holds.faces,
             );
             holds.face_friction_from(faces_from);
             // A corner of several triangles on this collider, or a particle resting on it

@@ -75,7 +75,7 @@ fn implicit_setup<'a, S: OdeState, Sys: OdeSystem<S> + ?Sized>(
 ///
 /// A triangle spanning a collider at its start (resting on it, no corner within its
 /// thickness) is held at its contact point rather than at its corners
-/// ([`NormalHolds::face_points`], [`PointRows`]): it can tip about the contact, and a strip
+/// ([`NormalHolds::faces`], [`PointRows`]): it can tip about the contact, and a strip
 /// hung off-centre over a thin rod slides off towards its long side. Its friction is pressed by the contact force that balances its corners' pushes. What
 /// the solve takes into a collider is still held at its corners (a triangle turning on a
 /// rod within a step rolls, and held at one point it cut into the rod).
@@ -107,11 +107,9 @@ impl Default for LinearlyImplicitEuler {
             rhs: vec![],
             dv: vec![],
             mask: vec![],
-            // Its triangles' holds carry their collider's friction, its particles' too; a
-            // triangle spanning a collider is held at its contact point.
+            // Its triangles' holds carry their collider's friction, its particles' too.
             holds: NormalHolds {
                 face_friction: true,
-                face_points: true,
                 ..NormalHolds::default()
             },
             last: PcgReport::default(),
@@ -189,8 +187,6 @@ impl<S: OdeState, Sys: OdeSystem<S> + ?Sized> Integrator<S, Sys> for ImplicitDam
             v.resize(n, Vector::ZERO);
         }
         lin.elastic_forces(t, ps, &mut self.f);
-        // Triangles spanning a collider held at their contact points.
-        self.holds.face_points = true;
         lin.hold_faces(t, h, ps, &self.f, &self.mask, false, &mut self.holds);
         lin.assemble_damping(ps, h, a);
         let m = lin.masses();
@@ -569,11 +565,7 @@ impl Default for BackwardEuler {
             d: vec![],
             vt: vec![],
             mask: vec![],
-            // A triangle spanning a collider is held at its contact point.
-            holds: NormalHolds {
-                face_points: true,
-                ..NormalHolds::default()
-            },
+            holds: NormalHolds::default(),
             report: NewtonReport::default(),
             stats: IntegratorStats::default(),
         }

@@ -616,10 +616,7 @@ impl LinearSolver {
         mask: &[Scalar],
         filters: &[(u32, Matrix3)],
     ) -> SolveReport {
-        match self {
-            LinearSolver::Pcg(p) => p.solve_filtered(a, b, x, mask, filters),
-            LinearSolver::Cholesky(c) => c.solve_filtered(a, b, x, mask, filters),
-        }
+        self.solve_constrained(a, b, x, mask, filters, &mut PointRows::default())
     }
 
     /// [`LinearSolver::solve_filtered`] with constraints on combinations of particles as
@@ -651,10 +648,7 @@ impl LinearSolver {
         mask: &[Scalar],
         filters: &[(u32, Matrix3)],
     ) -> Option<SolveReport> {
-        match self {
-            LinearSolver::Pcg(_) => None,
-            LinearSolver::Cholesky(c) => c.resolve(a, b, x, mask, filters),
-        }
+        self.resolve_constrained(a, b, x, mask, filters, &mut PointRows::default())
     }
 
     /// [`LinearSolver::resolve`] with constraints on combinations of particles as well
