@@ -880,12 +880,20 @@ impl Collider {
     /// The second look of an implicit step at the triangles ([`Collider::hold_faces`] was
     /// the first): `trial` holds where a solve would end the step (at `t + h`), `x0` and
     /// `v` the particles at its start `t`. Each triangle the trial leaves nearer the
-    /// collider than its thickness, by more than a hundredth of it, is met at the step's
-    /// start (its nearest point, normal `n` and distance `d₀` there); each of its corners
-    /// that the trial moves along `n` slower than `−(d₀ − thickness)⁺ / h` relative to the
-    /// collider's surface is held along `n` at that velocity, so the triangle arrives at
-    /// the thickness instead of going in (an active set: the caller solves again with the
-    /// holds). Returns how many holds it pushed onto `out`.
+    /// collider than its thickness, by more than a hundredth of it, or takes through the
+    /// collider (its corners moved by more than the thickness, and the direction from the
+    /// collider to its nearest point turned past a right angle: the swept test of
+    /// [`Collider::resolve_faces`]), is met at the step's start (its nearest point, normal
+    /// `n` and distance `d₀` there); each of its corners that the trial moves along `n`
+    /// slower than `−(d₀ − thickness)⁺ / h` relative to the collider's surface is held
+    /// along `n` at that velocity, so the triangle arrives at the thickness instead of
+    /// going in (an active set: the caller solves again with the holds). Returns how many
+    /// holds it pushed onto `out`.
+    ///
+    /// Without the swept test a cloth falling onto a rod thinner than a frame's fall went
+    /// through it in the trial, was put back on its side after each step, and stretched
+    /// over the rod from step to step until the rod cut through a cell
+    /// (`tests/collider_faces.rs`).
     #[allow(clippy::too_many_arguments)]
     pub fn hold_faces_trial(
         &self,
@@ -912,8 +920,33 @@ impl Collider {
             .min(inv_mass.len())
             .min(mask.len());
         let before = out.len();
-        for (ids, (_, _, _, dist)) in self.faces_within(&end, thick, edge, faces, trial, n) {
-            if thick - dist <= 0.01 * thick {
+        let shape_end = Pose3::from_parts(end.origin.to_f32(), end.rotation);
+        let clear = self.face_filter(&end, &shape_end, thick, edge);
+        for face in faces {
+            let ids = face.map(|i| i as usize);
+            if ids[0].max(ids[1]).max(ids[2]) >= n {
+                continue;
+            }
+            let tri = ids.map(|i| trial[i]);
+            // Corners that moved relative to the collider's surface by more than the
+            // thickness may have been taken through it (a rod thinner than a frame's fall):
+            // the triangle is looked at within twice that, as `resolve_faces`' swept test
+            // looks, and the particles' bound on it (which counts on their own swept test,
+            // not run on a trial) is not asked.
+            let swept = ids
+                .map(|i| (trial[i] - x0[i] - Self::surface_velocity(&end, trial[i]) * h).length())
+                .into_iter()
+                .fold(0.0, Scalar::max);
+            let grow = if swept > thick { 2.0 * swept } else { 0.0 };
+            if clear(tri, grow) || grow == 0.0 && self.feature_held(&end, thick, tri, None) {
+                continue;
+            }
+            let Some((_, _, n_end, dist)) = self.face_contact(&end, &shape_end, thick + grow, tri)
+            else {
+                continue;
+            };
+            let inside = thick - dist > 0.01 * thick;
+            if !inside && grow == 0.0 {
                 continue;
             }
             // Met at the start within what its corners travelled (and the thickness).
@@ -927,6 +960,11 @@ impl Collider {
             else {
                 continue;
             };
+            // Not within the thickness at the trial's end, but through: the direction from
+            // the collider to it turned past a right angle.
+            if !inside && n_end.dot(nrm) >= 0.0 {
+                continue;
+            }
             let vc = Self::surface_velocity(&start, point);
             let allowed = -(d0 - thick).max(0.0) / h;
             for i in ids {
