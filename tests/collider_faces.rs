@@ -131,21 +131,34 @@ fn run_with(
     if !faces {
         model.contact_faces.clear();
     }
-    let mut sim = Simulation::new(
+    let mut sim = stepped(model, state, integrator, h, SolverChoice::Auto);
+    for _ in 0..frames {
+        sim.advance_frame().unwrap();
+        each(&positions(&sim.state));
+    }
+    positions(&sim.state)
+}
+
+/// A simulation of `model` in frames of 1/60 s, taken in fixed steps of `h` by
+/// `integrator`, its linear solves by `solver`.
+fn stepped(
+    model: ParticleModel,
+    state: ParticleState,
+    integrator: IntegratorKind,
+    h: f64,
+    solver: SolverChoice,
+) -> Simulation<ParticleState, ParticleModel> {
+    Simulation::new(
         model,
         state,
         DriverConfig {
             integrator,
             policy: StepPolicy::Fixed { h },
             frame_dt: 1.0 / 60.0,
+            solver,
             ..Default::default()
         },
-    );
-    for _ in 0..frames {
-        sim.advance_frame().unwrap();
-        each(&positions(&sim.state));
-    }
-    positions(&sim.state)
+    )
 }
 
 /// A rod of radius 1 cm (a capsule along z) under the cloth, its axis midway between two
@@ -508,17 +521,7 @@ fn hangs_on_a_rod_at_rest(integrator: IntegratorKind, h: f64, solver: SolverChoi
     let edge = 0.6 / 31.0;
     let (mut model, state) = scene.build().unwrap();
     model.hold_faces = true;
-    let mut sim = Simulation::new(
-        model,
-        state,
-        DriverConfig {
-            integrator,
-            policy: StepPolicy::Fixed { h },
-            frame_dt: 1.0 / 60.0,
-            solver,
-            ..Default::default()
-        },
-    );
+    let mut sim = stepped(model, state, integrator, h, solver);
     let mut nearest = f64::INFINITY;
     for _ in 0..180 {
         sim.advance_frame().unwrap();
@@ -637,17 +640,7 @@ fn a_tet_slab_hangs_on_a_rod_thinner_than_its_cells_with_either_solver() {
     ] {
         let (mut model, state) = scene.clone().build().unwrap();
         model.hold_faces = true;
-        let mut sim = Simulation::new(
-            model,
-            state,
-            DriverConfig {
-                integrator,
-                policy: StepPolicy::Fixed { h: 1.0 / 60.0 },
-                frame_dt: 1.0 / 60.0,
-                solver,
-                ..Default::default()
-            },
-        );
+        let mut sim = stepped(model, state, integrator, 1.0 / 60.0, solver);
         let mut nearest = f64::INFINITY;
         for f in 0..240 {
             if let Err(e) = sim.advance_frame() {
@@ -839,15 +832,12 @@ fn land(scene: Scene, mut body: Rigid, faces: bool, frames: usize, from: usize) 
         model.contact_faces.clear();
     }
     let fixed = model.colliders.clone();
-    let mut sim = Simulation::new(
+    let mut sim = stepped(
         model,
         state,
-        DriverConfig {
-            integrator: IntegratorKind::SymplecticEuler,
-            policy: StepPolicy::Fixed { h: 1.0 / 1200.0 },
-            frame_dt: 1.0 / 60.0,
-            ..Default::default()
-        },
+        IntegratorKind::SymplecticEuler,
+        1.0 / 1200.0,
+        SolverChoice::Auto,
     );
     let (mut nearest, mut end, mut impulse, mut speed) = (f64::INFINITY, 0.0, 0.0, 0.0f64);
     for f in 0..frames {

@@ -600,6 +600,24 @@ impl Collider {
         }
     }
 
+    /// The square of how far a particle that ended a step of length `h` at `x`, from `x0`,
+    /// moved relative to the collider's surface at `pose` (the surface's velocity taken at
+    /// `x`, as [`Collider::swept_contact`] takes it).
+    #[inline(always)]
+    fn travel_sq(pose: &Pose, h: Scalar, x0: Vector, x: Vector) -> Scalar {
+        (x - x0 - Self::surface_velocity(pose, x) * h).length_squared()
+    }
+
+    /// The farthest any of the first `n` particles moved relative to the collider's surface
+    /// over a step from `x0` to `x` ([`Collider::travel_sq`]): the margin within which a
+    /// feature may have met the collider along its path.
+    fn fastest(pose: &Pose, h: Scalar, x0: &[Vector], x: &[Vector], n: usize) -> Scalar {
+        (0..n)
+            .map(|i| Self::travel_sq(pose, h, x0[i], x[i]))
+            .fold(0.0, Scalar::max)
+            .sqrt()
+    }
+
     /// Velocity of the collider's surface at `p` (at `pose`).
     fn surface_velocity(pose: &Pose, p: Vector) -> Vector {
         if pose.omega == Vector::ZERO {
@@ -922,23 +940,32 @@ impl Collider {
         let before = out.len();
         let shape_end = Pose3::from_parts(end.origin.to_f32(), end.rotation);
         let clear = self.face_filter(&end, &shape_end, thick, edge);
+        // Corners that moved relative to the collider's surface by more than the thickness
+        // may have been taken through it (a rod thinner than a frame's fall): such a
+        // triangle is looked at within twice that. Triangles clear by twice the fastest
+        // particle's travel are clear by their own corners' (`clear` is monotone in its
+        // margin): skipped before their travel is measured, as in `resolve_faces`.
+        let fastest = Self::fastest(&end, h, x0, trial, n);
+        let grow_any = if fastest > thick { 2.0 * fastest } else { 0.0 };
         for face in faces {
             let ids = face.map(|i| i as usize);
             if ids[0].max(ids[1]).max(ids[2]) >= n {
                 continue;
             }
             let tri = ids.map(|i| trial[i]);
-            // Corners that moved relative to the collider's surface by more than the
-            // thickness may have been taken through it (a rod thinner than a frame's fall):
-            // the triangle is looked at within twice that, and the particles' bound on it
-            // asked over the step, as `resolve_faces`' swept test looks and asks.
+            if clear(tri, grow_any) {
+                continue;
+            }
+            // The particles' bound on the triangle is asked over the step when its corners
+            // travelled that far, as `resolve_faces`' swept test asks it.
             let swept = ids
-                .map(|i| (trial[i] - x0[i] - Self::surface_velocity(&end, trial[i]) * h).length())
+                .map(|i| Self::travel_sq(&end, h, x0[i], trial[i]))
                 .into_iter()
-                .fold(0.0, Scalar::max);
+                .fold(0.0, Scalar::max)
+                .sqrt();
             let grow = if swept > thick { 2.0 * swept } else { 0.0 };
             let then = (grow > 0.0).then(|| (&start, ids.map(|i| x0[i])));
-            if clear(tri, grow) || self.feature_held(&end, thick, tri, then) {
+            if grow < grow_any && clear(tri, grow) || self.feature_held(&end, thick, tri, then) {
                 continue;
             }
             let Some((_, _, n_end, dist)) = self.face_contact(&end, &shape_end, thick + grow, tri)
@@ -1241,10 +1268,8 @@ impl Collider {
         };
         // The farthest any particle moved relative to the collider: features farther than
         // twice that (and the thickness) are skipped before their own travel is measured.
-        let moved = |x: &[Vector], i: usize| {
-            (x[i] - x0[i] - Self::surface_velocity(&pose, x[i]) * h).length_squared()
-        };
-        let fastest = (0..n).map(|i| moved(x, i)).fold(0.0, Scalar::max).sqrt();
+        let moved = |x: &[Vector], i: usize| Self::travel_sq(&pose, h, x0[i], x[i]);
+        let fastest = Self::fastest(&pose, h, x0, x, n);
         let grow = if fastest > thick { 2.0 * fastest } else { 0.0 };
         // A round shape's bound holds over the step too (see `feature_held`): told first, on
         // the positions alone.
