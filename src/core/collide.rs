@@ -537,9 +537,13 @@ impl Collider {
     /// [`Collider::contact`] for a particle that ended a step of length `h` at `p` with
     /// velocity `v`: when it moved relative to the surface by more than the thickness, the
     /// segment it swept (back from `p` by `h` times its relative velocity — its exact start
-    /// under symplectic Euler) is cast against the shape, and a hit from outside is the
-    /// contact, on the side it came from. Without this a particle crossing a shape thinner
-    /// than its travel in one step would pass through (or be pushed out the far side).
+    /// under symplectic Euler and the implicit methods) is followed from its start: the
+    /// first point within the thickness ([`Collider::first_within`]) is the contact, or, for
+    /// a segment starting within the thickness, a hit of the shape itself from outside, on
+    /// the side it came from. Without this a particle crossing a shape thinner than its
+    /// travel in one step would pass through (or be pushed out the far side), and one
+    /// passing within the thickness and on would pass a rod's side that its neighbour, in
+    /// the cloth, was stopped on top of: the rod between them.
     fn swept_contact(
         &self,
         pose: &Pose,
@@ -554,6 +558,13 @@ impl Collider {
         }
         let start = p - travel;
         let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+        // Along its path the particle may come within the thickness and pass on (a cloth's
+        // particle falling past a rod's side, its neighbour stopped on top): the first
+        // point of the path within the thickness is the contact. A path that starts within
+        // the thickness is cast against the shape itself.
+        if let Some((at, n)) = self.first_within(&shape_pose, thick, start, travel) {
+            return Some((at, n));
+        }
         let ray = parry3d::query::Ray::new(start.to_f32(), travel.to_f32());
         match self
             .shape
@@ -566,6 +577,94 @@ impl Collider {
             }
             _ => self.contact(pose, thick, p),
         }
+    }
+
+    /// The most steps of [`Collider::first_within`]'s conservative advancement: a path
+    /// that grazes the thickness without reaching it in as many is taken as missing it.
+    const ADVANCE: usize = 64;
+
+    /// Where the segment from `start` by `travel` first comes within `thick` of the shape at
+    /// `shape_pose`, and the shape's outward normal there (the direction from its nearest
+    /// point): the segment cast against the shape grown by the thickness, exactly for a
+    /// sphere, a capsule and a box (the first time into each of the grown shape's parts),
+    /// by conservative advancement for any other shape. `None` when the segment never comes
+    /// that near, or starts within it.
+    fn first_within(
+        &self,
+        shape_pose: &Pose3,
+        thick: Scalar,
+        start: Vector,
+        travel: Vector,
+    ) -> Option<(Vector, Vector)> {
+        // A round shape in its own frame, exactly: the first time the segment comes within
+        // the grown radius of the centre or the axis, and the direction from there.
+        let local = |p: Vector| {
+            (shape_pose.rotation.inverse() * (p - shape_pose.translation.to_scalar()).to_f32())
+                .to_scalar()
+        };
+        let round = |a: Vector, b: Vector, r: Scalar| {
+            let (o, d) = (local(start), local(start + travel) - local(start));
+            let t = first_within_capsule(a, b, r + thick, o, d)?;
+            let at = o + d * t;
+            let (_, off, _) = segment_nearest(a, b, at);
+            Some((t, shape_pose.rotation * off.normalize().to_f32()))
+        };
+        let hit = match self.fast {
+            Fast::Sphere(r) => round(Vector::ZERO, Vector::ZERO, r),
+            Fast::Cuboid(half) => {
+                let (o, d) = (local(start), local(start + travel) - local(start));
+                let half = half.to_scalar();
+                let t = first_within_box(half, thick, o, d)?;
+                let at = o + d * t;
+                let off = at - at.clamp(-half, half);
+                Some((t, shape_pose.rotation * off.normalize().to_f32()))
+            }
+            Fast::Capsule(cap) => round(
+                cap.segment.a.to_scalar(),
+                cap.segment.b.to_scalar(),
+                cap.radius as Scalar,
+            ),
+            // Any other shape by conservative advancement (Mirtich, *Impulse-based dynamic
+            // simulation of rigid body systems*, 1996): the distance is 1-Lipschitz along
+            // the path, so a step of what is left to the thickness never passes it. (Parry's
+            // cast of a ball against a convex polyhedron stopped up to 5 mm short of it.)
+            //
+            // A convex shape's distance is convex along the path too, so its tangent meets
+            // the thickness no later than the path does: the step is Newton's where that is
+            // longer (a path nearly along a face closes its distance a little each step),
+            // and a path whose distance grows never comes nearer.
+            _ => {
+                let len = travel.length();
+                let convex = self.shape.is_convex();
+                let mut t: Scalar = 0.0;
+                let mut found = None;
+                for _ in 0..Self::ADVANCE {
+                    let at = start + travel * t;
+                    let foot = self.shape.project_point(shape_pose, at.to_f32(), true);
+                    let off = at - foot.point.to_scalar();
+                    let d = if foot.is_inside { 0.0 } else { off.length() };
+                    if d <= thick * (1.0 + 1e-4) {
+                        found = (t > 0.0 && d > 0.0).then(|| (t, (off / d).to_f32()));
+                        break;
+                    }
+                    let mut step = (d - thick) / len;
+                    if convex {
+                        let rate = (off / d).dot(travel);
+                        if rate >= 0.0 {
+                            break;
+                        }
+                        step = step.max((d - thick) / -rate);
+                    }
+                    t += step;
+                    if t > 1.0 {
+                        break;
+                    }
+                }
+                found
+            }
+        };
+        let (toi, n) = hit?;
+        (toi > 0.0 && n.is_finite()).then(|| (start + travel * toi, n.to_scalar()))
     }
 
     /// Whether a particle at `p` moving at `v` is certainly clear of a half-space or a
@@ -1958,6 +2057,108 @@ fn triangle_box_penetration(
     Some((mid - n * depth, n, depth))
 }
 
+/// The point of segment `a b` nearest `p`, the offset from it to `p` and its length.
+fn segment_nearest(a: Vector, b: Vector, p: Vector) -> (Vector, Vector, Scalar) {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 {
+        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let q = a + ab * t;
+    let d = p - q;
+    (q, d, d.length())
+}
+
+/// The least `t` in `(0, 1]` at which `o + t d` is within `r` of segment `a b` (the capsule
+/// round it; a ball when `a = b`), or `None` if none is or `o` is within already. The
+/// capsule is the union of the cylinder round the segment and the balls round its ends, so
+/// the first time is the least of the first times into each: the cylinder's by the
+/// quadratic in `t` for the distance to the axis line (where the foot lies between the
+/// ends), each ball's by its own.
+fn first_within_capsule(a: Vector, b: Vector, r: Scalar, o: Vector, d: Vector) -> Option<Scalar> {
+    if segment_nearest(a, b, o).2 <= r || d == Vector::ZERO {
+        return None;
+    }
+    let ball = |c: Vector| {
+        let oc = o - c;
+        let (qa, qb, qc) = (d.dot(d), d.dot(oc), oc.dot(oc) - r * r);
+        let disc = qb * qb - qa * qc;
+        (disc >= 0.0).then(|| (-qb - disc.sqrt()) / qa)
+    };
+    let mut first = ball(a)
+        .into_iter()
+        .chain(ball(b))
+        .fold(Scalar::INFINITY, Scalar::min);
+    let ba = b - a;
+    let (baba, bad, oa) = (ba.dot(ba), ba.dot(d), o - a);
+    let (baoa, doa) = (ba.dot(oa), d.dot(oa));
+    let qa = baba * d.dot(d) - bad * bad;
+    if baba > 0.0 && qa > 0.0 {
+        let qb = baba * doa - baoa * bad;
+        let qc = baba * oa.dot(oa) - baoa * baoa - r * r * baba;
+        let disc = qb * qb - qa * qc;
+        if disc >= 0.0 {
+            let t = (-qb - disc.sqrt()) / qa;
+            let y = baoa + t * bad;
+            if (0.0..=baba).contains(&y) {
+                first = first.min(t);
+            }
+        }
+    }
+    (first > 0.0 && first <= 1.0).then_some(first)
+}
+
+/// The least `t` in `(0, 1]` at which `o + t d` is within `r` of the box of half extents
+/// `half` centred at the origin, or `None` if none is or `o` is within already. The box grown
+/// by `r` is the union of the box grown by `r` along one axis (three of them) and the
+/// capsules of radius `r` round its twelve edges: the first time is the least of the first
+/// times into each, the boxes' by their slabs.
+fn first_within_box(half: Vector, r: Scalar, o: Vector, d: Vector) -> Option<Scalar> {
+    let q = o.abs() - half;
+    if q.max(Vector::ZERO).length() + q.max_element().min(0.0) <= r || d == Vector::ZERO {
+        return None;
+    }
+    let slabs = |h: Vector| {
+        let (mut enter, mut exit) = (Scalar::NEG_INFINITY, Scalar::INFINITY);
+        for k in 0..3 {
+            if d[k] == 0.0 {
+                if o[k].abs() > h[k] {
+                    return None;
+                }
+                continue;
+            }
+            let (t1, t2) = ((-h[k] - o[k]) / d[k], (h[k] - o[k]) / d[k]);
+            enter = enter.max(t1.min(t2));
+            exit = exit.min(t1.max(t2));
+        }
+        (enter <= exit).then_some(enter)
+    };
+    let mut first = Scalar::INFINITY;
+    for k in 0..3 {
+        let mut h = half;
+        h[k] += r;
+        if let Some(t) = slabs(h) {
+            first = first.min(t);
+        }
+        // The four edges along axis `k`.
+        for (s1, s2) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let mut a = Vector::ZERO;
+            a[i] = s1 * half[i];
+            a[j] = s2 * half[j];
+            let mut b = a;
+            a[k] = -half[k];
+            b[k] = half[k];
+            if let Some(t) = first_within_capsule(a, b, r, o, d) {
+                first = first.min(t);
+            }
+        }
+    }
+    (first > 0.0 && first <= 1.0).then_some(first)
+}
+
 /// The point of capsule `cap`'s axis nearest `p` (in its frame), the offset from it to `p`
 /// and its length.
 fn capsule_axis_nearest(
@@ -2801,6 +3002,151 @@ mod tests {
             assert!(
                 clear > far / 2,
                 "{clear} of {far} without contact called clear"
+            );
+        }
+    }
+
+    /// A particle whose path in a step passes within the thickness of a collider and on
+    /// (a cloth's particle falling past a rod's side while its neighbour stops on top) is
+    /// stopped where its path first comes within the thickness, on the side it came from:
+    /// over random straight paths longer than the thickness near a sphere, a tilted capsule,
+    /// a tilted box and the same box as a convex hull (a general shape), each starting
+    /// outside the thickness, a contact is found exactly when the path's nearest approach
+    /// (sampled at 4,000 points, by each shape's distance written here: centre, axis
+    /// segment, box's clamped local coordinates) is within the thickness; it lies on the
+    /// path at the thickness from the shape, every sample before it farther, with the
+    /// distance's gradient as its normal. Before, a path that missed the shape itself and
+    /// ended outside the thickness had no contact (more than half of those found).
+    #[test]
+    fn a_particle_passing_within_the_thickness_stops_where_its_path_first_comes_that_near() {
+        let mut rng = crate::math::test_rng(0x9e37_79b9_7f4a_7c15u64);
+        let mut rnd = move || rng() as Scalar;
+        let thick: Scalar = 0.02;
+        let material = ContactMaterial {
+            thickness: thick as f64,
+            ..Default::default()
+        };
+        let tilt = Rot3::from_scaled_axis(glam::Vec3::new(0.3, 0.0, 0.2));
+        let at = [0.1, 0.2, -0.1];
+        let fixed = Motion::Fixed { position: at };
+        let centre = Vector::new(at[0] as Scalar, at[1] as Scalar, at[2] as Scalar);
+        let local = move |p: Vector| (tilt.inverse() * (p - centre).to_f32()).to_scalar();
+        type Distance = Box<dyn Fn(Vector) -> Scalar>;
+        let shapes: [(SharedShape, Distance); 4] = [
+            (
+                SharedShape::ball(0.05),
+                Box::new(move |p: Vector| (p - centre).length() - 0.05),
+            ),
+            (
+                SharedShape::capsule_y(0.25, 0.01),
+                Box::new(move |p: Vector| {
+                    let q = local(p);
+                    let y = q.y.clamp(-0.25, 0.25);
+                    (q - Vector::new(0.0, y, 0.0)).length() - 0.01
+                }),
+            ),
+            (
+                SharedShape::cuboid(0.01, 0.2, 0.05),
+                Box::new(move |p: Vector| {
+                    let half = Vector::new(0.01, 0.2, 0.05);
+                    let q = local(p).abs() - half;
+                    q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
+                }),
+            ),
+            // The same box as a convex hull of its corners: a general shape, cast by parry.
+            (
+                SharedShape::convex_hull(
+                    &[-1.0f32, 1.0]
+                        .into_iter()
+                        .flat_map(|x| [-1.0f32, 1.0].into_iter().map(move |y| (x, y)))
+                        .flat_map(|(x, y)| {
+                            [-1.0f32, 1.0]
+                                .into_iter()
+                                .map(move |z| glam::Vec3::new(0.01 * x, 0.2 * y, 0.05 * z))
+                        })
+                        .collect::<Vec<_>>(),
+                )
+                .unwrap(),
+                Box::new(move |p: Vector| {
+                    let half = Vector::new(0.01, 0.2, 0.05);
+                    let q = local(p).abs() - half;
+                    q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
+                }),
+            ),
+        ];
+        let h = 0.01;
+        for (k, (shape, dist)) in shapes.into_iter().enumerate() {
+            let rotation = if k == 0 { Rot3::IDENTITY } else { tilt };
+            let c = Collider::new(shape, fixed, rotation, material);
+            let pose = c.pose(0.0);
+            let (mut met, mut passed_by) = (0, 0);
+            for _ in 0..4_000 {
+                let start = centre + Vector::new(rnd(), rnd(), rnd()) * 0.12;
+                let travel = Vector::new(rnd(), rnd(), rnd()) * 0.15;
+                if dist(start) <= 1.01 * thick || travel.length() <= thick {
+                    continue;
+                }
+                let end = start + travel;
+                let samples = 4_000;
+                let path =
+                    (0..=samples).map(|j| start + travel * (j as Scalar / samples as Scalar));
+                let nearest = path.clone().map(&dist).fold(Scalar::INFINITY, Scalar::min);
+                let hit = c.swept_contact(&pose, thick, h, end, travel / h);
+                // Marginal paths, within a thousandth of the thickness, either way.
+                let tol = 1e-3 * thick;
+                if (nearest - thick).abs() < tol {
+                    continue;
+                }
+                if nearest > thick {
+                    assert!(
+                        hit.is_none(),
+                        "{k}: {start:?} by {travel:?}, {nearest} away: {hit:?}"
+                    );
+                    continue;
+                }
+                let shape_pose = Pose3::from_parts(pose.origin.to_f32(), pose.rotation);
+                // The path as `swept_contact` takes it back from the end (the same bits).
+                let back = (travel / h - Collider::surface_velocity(&pose, end)) * h;
+                let met_at = c.first_within(&shape_pose, thick, end - back, back);
+                // The contact is where the path first comes within the thickness.
+                let Some((target, n)) = hit else {
+                    panic!("{k}: {start:?} by {travel:?} came {nearest} near: no contact");
+                };
+                assert_eq!(Some((target, n)), met_at);
+                met += 1;
+                passed_by += usize::from(dist(end) > thick);
+                // On the path, at the thickness (parry's casts against a capsule and a box
+                // end within 10⁻⁵ m of it), and every sample of the path before it farther.
+                let s = (target - start).dot(travel) / travel.length_squared();
+                assert!(
+                    (target - (start + travel * s)).length() < 1e-5 && (0.0..=1.0).contains(&s),
+                    "{k}: {target:?} is off the path from {start:?} by {travel:?}"
+                );
+                assert!((dist(target) - thick).abs() < tol, "{k}: {}", dist(target));
+                let earlier = path
+                    .clone()
+                    .take_while(|&q| (q - start).dot(travel) < s * travel.length_squared())
+                    .map(&dist)
+                    .fold(Scalar::INFINITY, Scalar::min);
+                assert!(
+                    earlier > thick - tol,
+                    "{k}: {start:?} by {travel:?} came {earlier} near before {target:?}"
+                );
+                let e = 1e-5;
+                let grad = Vector::new(
+                    dist(target + Vector::X * e) - dist(target - Vector::X * e),
+                    dist(target + Vector::Y * e) - dist(target - Vector::Y * e),
+                    dist(target + Vector::Z * e) - dist(target - Vector::Z * e),
+                ) / (2.0 * e);
+                assert!(
+                    (n - grad.normalize()).length() < 1e-2,
+                    "{k}: normal {n:?}, the distance's gradient {grad:?}"
+                );
+            }
+            println!("{k}: {met} paths met the thickness, {passed_by} ending outside it");
+            assert!(
+                met > 200 && 3 * passed_by > met,
+                "{k}: {met} met, {passed_by} passed by"
             );
         }
     }

@@ -378,6 +378,7 @@ impl SparseCholesky {
         // `schur`: Â⁻¹ C'ᵀ p.
         let v = &mut self.schur_m;
         v.clear();
+        crate::core::room(v, 4 * rows.room().max(k));
         v.resize(4 * k, 0.0);
         let (r, rest) = v.split_at_mut(k);
         let (z, rest) = rest.split_at_mut(k);

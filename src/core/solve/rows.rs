@@ -88,6 +88,12 @@ impl PointRows {
         self.kept.clear();
     }
 
+    /// How many rows the lists have room for ([`PointRows::reserve_for`]): scratch kept by
+    /// row elsewhere takes as much, so that it too grows only when the rows do.
+    pub(crate) fn room(&self) -> usize {
+        self.rows.capacity()
+    }
+
     /// No rows kept.
     pub fn is_empty(&self) -> bool {
         !self.kept.iter().any(|&k| k)
