@@ -2057,18 +2057,27 @@ fn triangle_box_penetration(
     Some((mid - n * depth, n, depth))
 }
 
+/// The point of segment `a b` nearest `p`, the offset from it to `p` and its length, in
+/// any of glam's vector types (the collider's precision, or parry's).
+macro_rules! segment_nearest {
+    ($a:expr, $b:expr, $p:expr) => {{
+        let (a, b, p) = ($a, $b, $p);
+        let ab = b - a;
+        let len2 = ab.length_squared();
+        let t = if len2 > 0.0 {
+            ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let q = a + ab * t;
+        let d = p - q;
+        (q, d, d.length())
+    }};
+}
+
 /// The point of segment `a b` nearest `p`, the offset from it to `p` and its length.
 fn segment_nearest(a: Vector, b: Vector, p: Vector) -> (Vector, Vector, Scalar) {
-    let ab = b - a;
-    let len2 = ab.length_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let q = a + ab * t;
-    let d = p - q;
-    (q, d, d.length())
+    segment_nearest!(a, b, p)
 }
 
 /// The least `t` in `(0, 1]` at which `o + t d` is within `r` of segment `a b` (the capsule
@@ -2165,17 +2174,7 @@ fn capsule_axis_nearest(
     cap: &parry3d::shape::Capsule,
     p: glam::Vec3,
 ) -> (glam::Vec3, glam::Vec3, f32) {
-    let (a, b) = (cap.segment.a, cap.segment.b);
-    let ab = b - a;
-    let len2 = ab.length_squared();
-    let t = if len2 > 0.0 {
-        ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let q = a + ab * t;
-    let d = p - q;
-    (q, d, d.length())
+    segment_nearest!(cap.segment.a, cap.segment.b, p)
 }
 
 /// Whether triangle `t` (a segment when two corners coincide) and the box of half extents `h`
