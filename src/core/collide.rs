@@ -3052,7 +3052,8 @@ mod tests {
                     q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
                 }),
             ),
-            // The same box as a convex hull of its corners: a general shape, cast by parry.
+            // The same box as a convex hull of its corners: a general shape, by conservative
+            // advancement.
             (
                 SharedShape::convex_hull(
                     &[-1.0f32, 1.0]
