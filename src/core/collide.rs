@@ -602,8 +602,11 @@ impl Collider {
             (shape_pose.rotation.inverse() * (p - shape_pose.translation.to_scalar()).to_f32())
                 .to_scalar()
         };
+        let (o, d) = {
+            let o = local(start);
+            (o, local(start + travel) - o)
+        };
         let round = |a: Vector, b: Vector, r: Scalar| {
-            let (o, d) = (local(start), local(start + travel) - local(start));
             let t = first_within_capsule(a, b, r + thick, o, d)?;
             let at = o + d * t;
             let (_, off, _) = segment_nearest(a, b, at);
@@ -612,7 +615,6 @@ impl Collider {
         let hit = match self.fast {
             Fast::Sphere(r) => round(Vector::ZERO, Vector::ZERO, r),
             Fast::Cuboid(half) => {
-                let (o, d) = (local(start), local(start + travel) - local(start));
                 let half = half.to_scalar();
                 let t = first_within_box(half, thick, o, d)?;
                 let at = o + d * t;
@@ -3030,6 +3032,11 @@ mod tests {
         let fixed = Motion::Fixed { position: at };
         let centre = Vector::new(at[0] as Scalar, at[1] as Scalar, at[2] as Scalar);
         let local = move |p: Vector| (tilt.inverse() * (p - centre).to_f32()).to_scalar();
+        let box_distance = move |p: Vector| {
+            let half = Vector::new(0.01, 0.2, 0.05);
+            let q = local(p).abs() - half;
+            q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
+        };
         type Distance = Box<dyn Fn(Vector) -> Scalar>;
         let shapes: [(SharedShape, Distance); 4] = [
             (
@@ -3044,14 +3051,7 @@ mod tests {
                     (q - Vector::new(0.0, y, 0.0)).length() - 0.01
                 }),
             ),
-            (
-                SharedShape::cuboid(0.01, 0.2, 0.05),
-                Box::new(move |p: Vector| {
-                    let half = Vector::new(0.01, 0.2, 0.05);
-                    let q = local(p).abs() - half;
-                    q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
-                }),
-            ),
+            (SharedShape::cuboid(0.01, 0.2, 0.05), Box::new(box_distance)),
             // The same box as a convex hull of its corners: a general shape, by conservative
             // advancement.
             (
@@ -3067,11 +3067,7 @@ mod tests {
                         .collect::<Vec<_>>(),
                 )
                 .unwrap(),
-                Box::new(move |p: Vector| {
-                    let half = Vector::new(0.01, 0.2, 0.05);
-                    let q = local(p).abs() - half;
-                    q.max(Vector::ZERO).length() + q.x.max(q.y).max(q.z).min(0.0)
-                }),
+                Box::new(box_distance),
             ),
         ];
         let h = 0.01;
