@@ -1,0 +1,143 @@
+//! A cloth on a collider of each kind: the cloth pile's 64×64 cloth (self-collision off)
+//! dropped onto its sphere on the ground, the sphere given as parry's ball, as the convex hull
+//! of an icosphere (162 vertices) and as that icosphere's triangle mesh (320 triangles), at the
+//! pile's radius (0.3 m: the cloth drapes over it) and at 0.1 m (a small prop: most of the
+//! cloth falls past it). Balls have their own exact queries; hulls and meshes go through
+//! parry's point projections and contact queries, and are skipped for particles outside the
+//! shape's box grown by the thickness and their path. Time per frame of 1/60 s, symplectic
+//! Euler at the pile's stable step and linearly implicit Euler at one step a frame; the clock
+//! starts at frame 30 (the cloth reaching the sphere) and the state is not reset between
+//! samples, so every sample is a frame of the same ongoing simulation.
+//!
+//! `cargo bench --bench colliders`; `THREADS=N` as in the other benches.
+
+// Casts to and from `Scalar` are no-ops in one precision and needed in the other.
+#![allow(clippy::unnecessary_cast)]
+
+use bevy_soft_body::core::collide::{Collider, SharedShape};
+use bevy_soft_body::prelude::*;
+use criterion::{Criterion, criterion_group, criterion_main};
+use glam::Vec3;
+
+mod common;
+use common::timed;
+
+/// A unit icosahedron subdivided `levels` times, its vertices pushed onto the sphere of
+/// radius `r`: `10·4ˡ + 2` vertices, `20·4ˡ` triangles.
+fn icosphere(r: f32, levels: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let corners = [
+        [-1., t, 0.],
+        [1., t, 0.],
+        [-1., -t, 0.],
+        [1., -t, 0.],
+        [0., -1., t],
+        [0., 1., t],
+        [0., -1., -t],
+        [0., 1., -t],
+        [t, 0., -1.],
+        [t, 0., 1.],
+        [-t, 0., -1.],
+        [-t, 0., 1.],
+    ];
+    let mut v: Vec<Vec3> = corners
+        .iter()
+        .map(|p| Vec3::from_array(*p).normalize())
+        .collect();
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..levels {
+        let mut middles = std::collections::HashMap::new();
+        let mut middle = |a: u32, b: u32, v: &mut Vec<Vec3>| {
+            *middles.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
+                v.len() as u32 - 1
+            })
+        };
+        let mut finer = Vec::with_capacity(4 * f.len());
+        for [a, b, c] in f {
+            let (ab, bc, ca) = (
+                middle(a, b, &mut v),
+                middle(b, c, &mut v),
+                middle(c, a, &mut v),
+            );
+            finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        f = finer;
+    }
+    (v.into_iter().map(|p| p * r).collect(), f)
+}
+
+fn bench(c: &mut Criterion) {
+    let prec = bevy_soft_body::math::PRECISION;
+    let mut g = c.benchmark_group(format!("colliders_{prec}"));
+    g.sample_size(10);
+    for radius in [0.3, 0.1] {
+        for shape in ["ball", "hull", "trimesh"] {
+            for method in ["symplectic_euler", "linearly_implicit_euler"] {
+                let p = build::ClothPileParams {
+                    cloths: 1,
+                    self_collision: None,
+                    radius,
+                    ..Default::default()
+                }
+                .with_resolution(64);
+                let (mut model, state) = build::cloth_pile(&p).unwrap().build().unwrap();
+                let (v, f) = icosphere(radius as f32, 2);
+                let s = &model.colliders[1];
+                let replaced = match shape {
+                    "ball" => SharedShape::ball(radius as f32),
+                    "hull" => SharedShape::convex_hull(&v).expect("an icosphere's hull"),
+                    _ => SharedShape::trimesh(v, f).expect("an icosphere's triangles"),
+                };
+                model.colliders[1] = Collider::new(replaced, s.motion, s.rotation, s.material);
+                let (integrator, h) = match method {
+                    "symplectic_euler" => (IntegratorKind::SymplecticEuler, p.stable_step()),
+                    _ => (IntegratorKind::LinearlyImplicitEuler, 1.0 / 60.0),
+                };
+                let mut sim = Simulation::new(
+                    model,
+                    state,
+                    DriverConfig {
+                        integrator,
+                        policy: StepPolicy::Fixed { h },
+                        frame_dt: 1.0 / 60.0,
+                        ..Default::default()
+                    },
+                );
+                sim.run(30, |_, _| {}).unwrap();
+                g.bench_function(format!("{method}/{shape}/r{radius}"), |b| {
+                    b.iter_custom(|iters| {
+                        timed(iters, || {
+                            sim.advance_frame().unwrap();
+                        })
+                    })
+                });
+            }
+        }
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
