@@ -15,78 +15,13 @@
 #![allow(clippy::unnecessary_cast)]
 
 use bevy_soft_body::core::collide::{Collider, SharedShape};
+use bevy_soft_body::core::detail;
 use bevy_soft_body::prelude::*;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::Vec3;
 
 mod common;
 use common::timed;
-
-/// A unit icosahedron subdivided `levels` times, its vertices pushed onto the sphere of
-/// radius `r`: `10·4ˡ + 2` vertices, `20·4ˡ` triangles.
-fn icosphere(r: f32, levels: usize) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-    let t = (1.0 + 5f32.sqrt()) / 2.0;
-    let corners = [
-        [-1., t, 0.],
-        [1., t, 0.],
-        [-1., -t, 0.],
-        [1., -t, 0.],
-        [0., -1., t],
-        [0., 1., t],
-        [0., -1., -t],
-        [0., 1., -t],
-        [t, 0., -1.],
-        [t, 0., 1.],
-        [-t, 0., -1.],
-        [-t, 0., 1.],
-    ];
-    let mut v: Vec<Vec3> = corners
-        .iter()
-        .map(|p| Vec3::from_array(*p).normalize())
-        .collect();
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..levels {
-        let mut middles = std::collections::HashMap::new();
-        let mut middle = |a: u32, b: u32, v: &mut Vec<Vec3>| {
-            *middles.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                v.push(((v[a as usize] + v[b as usize]) * 0.5).normalize());
-                v.len() as u32 - 1
-            })
-        };
-        let mut finer = Vec::with_capacity(4 * f.len());
-        for [a, b, c] in f {
-            let (ab, bc, ca) = (
-                middle(a, b, &mut v),
-                middle(b, c, &mut v),
-                middle(c, a, &mut v),
-            );
-            finer.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        f = finer;
-    }
-    (v.into_iter().map(|p| p * r).collect(), f)
-}
 
 fn bench(c: &mut Criterion) {
     let prec = bevy_soft_body::math::PRECISION;
@@ -103,7 +38,8 @@ fn bench(c: &mut Criterion) {
                 }
                 .with_resolution(64);
                 let (mut model, state) = build::cloth_pile(&p).unwrap().build().unwrap();
-                let (v, f) = icosphere(radius as f32, 2);
+                let (v, f) = detail::icosphere(2);
+                let v: Vec<Vec3> = v.into_iter().map(|p| p * radius as f32).collect();
                 let s = &model.colliders[1];
                 let replaced = match shape {
                     "ball" => SharedShape::ball(radius as f32),

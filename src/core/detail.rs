@@ -365,67 +365,69 @@ fn for_each_face_normal(x: &[Vec3], triangles: &[[u32; 3]], mut f: impl FnMut(&[
     }
 }
 
+/// A sphere of triangles: the icosahedron cut `k` times by a [`Tessellation`] of level 2
+/// (each triangle into four at its edges' midpoints), every vertex pushed onto the unit
+/// sphere: `10·4ᵏ + 2` vertices, `20·4ᵏ` triangles.
+pub fn icosphere(k: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+    let g = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut x: Vec<Vec3> = [
+        [-1.0, g, 0.0],
+        [1.0, g, 0.0],
+        [-1.0, -g, 0.0],
+        [1.0, -g, 0.0],
+        [0.0, -1.0, g],
+        [0.0, 1.0, g],
+        [0.0, -1.0, -g],
+        [0.0, 1.0, -g],
+        [g, 0.0, -1.0],
+        [g, 0.0, 1.0],
+        [-g, 0.0, -1.0],
+        [-g, 0.0, 1.0],
+    ]
+    .map(|p| Vec3::from_array(p).normalize())
+    .to_vec();
+    let mut t: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..k {
+        let fine = Tessellation::new(&t, x.len(), 2).expect("an icosphere's triangles");
+        let mut y = vec![[0.0; 3]; fine.len()];
+        fine.apply(
+            &x,
+            Rounding {
+                alpha: 0.0,
+                ..Default::default()
+            },
+            &mut y,
+        );
+        x = y.iter().map(|p| Vec3::from_array(*p).normalize()).collect();
+        t = fine.triangles().to_vec();
+    }
+    (x, t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// An icosahedron refined `k` times, projected on the unit sphere.
-    fn icosphere(k: u32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
-        let g = (1.0 + 5f32.sqrt()) / 2.0;
-        let mut x: Vec<Vec3> = [
-            [-1.0, g, 0.0],
-            [1.0, g, 0.0],
-            [-1.0, -g, 0.0],
-            [1.0, -g, 0.0],
-            [0.0, -1.0, g],
-            [0.0, 1.0, g],
-            [0.0, -1.0, -g],
-            [0.0, 1.0, -g],
-            [g, 0.0, -1.0],
-            [g, 0.0, 1.0],
-            [-g, 0.0, -1.0],
-            [-g, 0.0, 1.0],
-        ]
-        .map(|p| Vec3::from_array(p).normalize())
-        .to_vec();
-        let mut t: Vec<[u32; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        for _ in 0..k {
-            let fine = Tessellation::new(&t, x.len(), 2).unwrap();
-            let mut y = vec![[0.0; 3]; fine.len()];
-            fine.apply(
-                &x,
-                Rounding {
-                    alpha: 0.0,
-                    ..Default::default()
-                },
-                &mut y,
-            );
-            x = y.iter().map(|p| Vec3::from_array(*p).normalize()).collect();
-            t = fine.triangles().to_vec();
-        }
-        (x, t)
-    }
 
     /// Largest distance of the fine vertices from the unit sphere, and the longest coarse edge.
     fn sphere_error(k: u32, alpha: f32) -> (f64, f64) {
