@@ -27,7 +27,9 @@ fn bench(c: &mut Criterion) {
     let prec = bevy_soft_body::math::PRECISION;
     let mut g = c.benchmark_group(format!("colliders_{prec}"));
     g.sample_size(10);
+    let (unit, triangles) = detail::icosphere(2);
     for radius in [0.3, 0.1] {
+        let v: Vec<Vec3> = unit.iter().map(|p| *p * radius as f32).collect();
         for shape in ["ball", "hull", "trimesh"] {
             for method in ["symplectic_euler", "linearly_implicit_euler"] {
                 let p = build::ClothPileParams {
@@ -38,13 +40,12 @@ fn bench(c: &mut Criterion) {
                 }
                 .with_resolution(64);
                 let (mut model, state) = build::cloth_pile(&p).unwrap().build().unwrap();
-                let (v, f) = detail::icosphere(2);
-                let v: Vec<Vec3> = v.into_iter().map(|p| p * radius as f32).collect();
                 let s = &model.colliders[1];
                 let replaced = match shape {
                     "ball" => SharedShape::ball(radius as f32),
                     "hull" => SharedShape::convex_hull(&v).expect("an icosphere's hull"),
-                    _ => SharedShape::trimesh(v, f).expect("an icosphere's triangles"),
+                    _ => SharedShape::trimesh(v.clone(), triangles.clone())
+                        .expect("an icosphere's triangles"),
                 };
                 model.colliders[1] = Collider::new(replaced, s.motion, s.rotation, s.material);
                 let (integrator, h) = match method {
