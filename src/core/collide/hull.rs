@@ -24,6 +24,7 @@
 //! 100 µs for 162 vertices; colliders are made afresh every frame from the same shapes, so
 //! the planes are kept per shape (by the address of its shared allocation, while it lives).
 
+use crate::core::self_contact::closest_on_triangle;
 use parry3d::shape::{Shape, SharedShape};
 use std::sync::{Arc, Mutex, Weak};
 
@@ -150,7 +151,8 @@ impl HullPlanes {
     /// there, and the signed distance (negative inside): see the module's docs. A point
     /// outside whose foot on its farthest plane falls beside that triangle (near an edge or
     /// a corner) takes the nearest of the nearest points of every triangle it is in front of
-    /// (one of those holds the nearest point: where it lies on several triangles, `p − q` is
+    /// (Ericson's point–triangle test, `self_contact::closest_on_triangle`; one of those
+    /// holds the nearest point: where it lies on several triangles, `p − q` is
     /// in their normals' cone, and its square `Σ aᵢ (nᵢ · (p − q)) > 0` makes some
     /// `nᵢ · (p − q)` positive); the normal is then the direction from that point. `None`
     /// when a plane puts `p` at `within` or farther (so is the hull).
@@ -173,8 +175,9 @@ impl HullPlanes {
         let (mut q, mut d2) = (point, f32::INFINITY);
         for i in 0..self.corners.len() {
             if self.signed(i, p) > 0.0 {
-                let [a, b, c] = self.corners[i];
-                let qi = closest_on_triangle(p, a, b, c);
+                let [a, b, c] = self.corners[i].map(|v| v.as_dvec3());
+                let w = closest_on_triangle(p.as_dvec3(), a, b, c);
+                let qi = (a * w[0] + b * w[1] + c * w[2]).as_vec3();
                 let di = (p - qi).length_squared();
                 if di < d2 {
                     (q, d2) = (qi, di);
@@ -270,38 +273,4 @@ impl HullPlanes {
     fn signed(&self, i: usize, p: glam::Vec3) -> f32 {
         self.nx[i] * p.x + self.ny[i] * p.y + self.nz[i] * p.z - self.w[i]
     }
-}
-
-/// The point of triangle `abc` nearest `p` (Ericson, *Real-Time Collision Detection*, 2005,
-/// §5.1.5: by the Voronoi regions of its corners, edges and face).
-fn closest_on_triangle(p: glam::Vec3, a: glam::Vec3, b: glam::Vec3, c: glam::Vec3) -> glam::Vec3 {
-    let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a;
-    }
-    let bp = p - b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return a + ab * (d1 / (d1 - d3));
-    }
-    let cp = p - c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return a + ac * (d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    }
-    let denom = 1.0 / (va + vb + vc);
-    a + ab * (vb * denom) + ac * (vc * denom)
 }
