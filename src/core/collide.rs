@@ -3069,10 +3069,11 @@ mod tests {
         };
         general
     }
+
     /// The distance from `p` to a convex hull (parry's `convex_hull` of its points: vertices
-    /// and triangles), negative inside, by brute force: the nearest of every hull triangle's nearest points (parry's point–triangle
-    /// projection), the sign from the planes of the triangles. A reference apart from
-    /// [`HullPlanes::foot`] and from parry's GJK.
+    /// and triangles), negative inside, by brute force: the nearest of every hull triangle's
+    /// nearest points (parry's point–triangle projection), the sign from the planes of the
+    /// triangles. A reference apart from [`HullPlanes::foot`] and from parry's GJK.
     fn hull_distance(hull: &(Vec<glam::Vec3>, Vec<[u32; 3]>), p: glam::Vec3) -> (f32, glam::Vec3) {
         use parry3d::query::PointQuery;
         let (v, tris) = hull;
@@ -3118,11 +3119,13 @@ mod tests {
 
     /// A convex polyhedron's distance to a triangle by its own triangles' planes
     /// ([`HullPlanes::triangle`]), on twenty random hulls of 100 points on ellipsoids (a
-    /// rounded prop's hull) and random small triangles near them, against the brute-force distance ([`hull_triangle_distance`]): what it settles is
-    /// the reference's distance, at a corner of the triangle that far from the hull; what it
-    /// calls out of reach is; and it settles at least 30 % of the triangles within reach
-    /// (43 % here; the others span an edge of the hull and are nearest there), or it would
-    /// spare nothing. Tolerance as in
+    /// rounded prop's hull) and random small triangles near them, against the brute-force
+    /// distance ([`hull_triangle_distance`]): what it settles is the reference's distance,
+    /// at a corner of the triangle that far from the hull; what it calls out of reach is;
+    /// and it settles at least 30 % of the triangles within reach (43 % here; the others
+    /// span an edge of the hull and are nearest there), or it would spare nothing. Making
+    /// every triangle's distance its plane's (as if the corner's foot always fell in that
+    /// plane's triangle) fails it. Tolerance as in
     /// `a_hulls_planes_answer_as_the_brute_force_distance`.
     #[test]
     fn a_hulls_planes_settle_a_triangles_distance_as_brute_force() {
