@@ -1,9 +1,9 @@
-//! A convex polyhedron's boundary as the planes of its own triangles, for point queries
-//! without GJK.
+//! A convex polyhedron's boundary as the planes of its own triangles, for point and
+//! triangle queries without GJK.
 //!
 //! Parry projects a point onto a convex polyhedron by GJK, each support point a scan of
 //! every vertex: 2.6 µs a point on a 162-vertex hull, 10 µs on a 642-vertex one. The planes
-//! of a triangulation of the hull's boundary answer most of what a particle asks, exactly:
+//! of a triangulation of the hull's boundary answer a point's query exactly:
 //!
 //! - Each triangle's plane is a supporting plane (its offset is the hull's support value
 //!   along the normal), so the distance of a point outside is at least the largest signed
@@ -13,16 +13,18 @@
 //! - A point inside (every `s ≤ 0`) is nearest the boundary on the plane it is least inside
 //!   of: the ball of that radius about it lies in the hull, and touches the plane within
 //!   the hull.
+//! - What is left (a point outside whose foot falls beside its triangle: near an edge or a
+//!   corner) takes the nearest of the nearest points of the triangles it is in front of.
 //!
-//! What is left (a point outside whose foot falls beside its triangle: near an edge or a
-//! corner) takes the nearest of the nearest points of the triangles it is in front of. Parry's
-//! GJK projection onto a `ConvexPolyhedron` is less exact: within 4 cm of twenty random hulls
-//! its distance came out up to 3.1 mm off a brute-force distance over the triangles (the
-//! unit test that checks these answers against it prints the figure). The triangles are parry's convex hull of the polyhedron's vertices
-//! (parry's own `ConvexPolyhedron` merges triangles within about 1.5° into one face, with the
-//! first one's normal, so its faces' planes are not the hull's). Computing them costs about
-//! 100 µs for 162 vertices; colliders are made afresh every frame from the same shapes, so
-//! the planes are kept per shape (by the address of its shared allocation, while it lives).
+//! Parry's GJK projection onto a `ConvexPolyhedron` is less exact: within 4 cm of twenty
+//! random hulls its distance came out up to 3.1 mm off a brute-force distance over the
+//! triangles (the unit test that checks these answers against it prints the figure).
+//!
+//! The triangles are parry's convex hull of the polyhedron's vertices (parry's own
+//! `ConvexPolyhedron` merges triangles within about 1.5° into one face, with the first one's
+//! normal, so its faces' planes are not the hull's). Computing them costs about 100 µs for
+//! 162 vertices; colliders are made afresh every frame from the same shapes, so the planes
+//! are kept per shape (by the address of its shared allocation, while it lives).
 
 use crate::core::self_contact::closest_on_triangle;
 use parry3d::shape::{Shape, SharedShape};
@@ -164,8 +166,8 @@ impl HullPlanes {
         let normal = glam::Vec3::new(self.nx[k], self.ny[k], self.nz[k]);
         let point = p - normal * best;
         let [a, b, c] = self.corners[k];
-        let within = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
-        if best <= 0.0 || (within(a, b) && within(b, c) && within(c, a)) {
+        let left_of = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
+        if best <= 0.0 || (left_of(a, b) && left_of(b, c) && left_of(c, a)) {
             return Some(HullFoot {
                 point,
                 normal,
@@ -230,8 +232,8 @@ impl HullPlanes {
         let normal = glam::Vec3::new(self.nx[k], self.ny[k], self.nz[k]);
         let point = t[corner] - normal * best;
         let [a, b, c] = self.corners[k];
-        let within = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
-        if within(a, b) && within(b, c) && within(c, a) {
+        let left_of = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
+        if left_of(a, b) && left_of(b, c) && left_of(c, a) {
             Ok(Some((corner, normal, best)))
         } else {
             Err(())
