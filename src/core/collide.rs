@@ -1824,19 +1824,14 @@ impl Collider {
             ),
             _ => (Vector::ZERO, Scalar::INFINITY),
         };
-        let general = matches!(self.fast, Fast::General { .. });
+        // A ball's sphere is the ball itself: no box besides.
+        let boxed = !matches!(self.fast, Fast::Sphere(_));
         move |[pa, pb, pc]: [Vector; 3], more: Scalar| {
             let m = Vector::splat(more);
-            let outside_box = || {
-                (pa.min(pb).min(pc) - m).cmpgt(hi).any() || (pa.max(pb).max(pc) + m).cmplt(lo).any()
-            };
-            if general {
-                outside_box() || (pa - centre).length_squared() > (reach + more) * (reach + more)
-            } else if reach.is_finite() {
-                (pa - centre).length_squared() > (reach + more) * (reach + more)
-            } else {
-                outside_box()
-            }
+            (reach.is_finite() && (pa - centre).length_squared() > (reach + more) * (reach + more))
+                || (boxed
+                    && ((pa.min(pb).min(pc) - m).cmpgt(hi).any()
+                        || (pa.max(pb).max(pc) + m).cmplt(lo).any()))
         }
     }
 

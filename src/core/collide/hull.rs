@@ -163,11 +163,9 @@ impl HullPlanes {
         if best >= within {
             return None;
         }
-        let normal = glam::Vec3::new(self.nx[k], self.ny[k], self.nz[k]);
+        let normal = self.normal(k);
         let point = p - normal * best;
-        let [a, b, c] = self.corners[k];
-        let left_of = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
-        if best <= 0.0 || (left_of(a, b) && left_of(b, c) && left_of(c, a)) {
+        if best <= 0.0 || self.holds(k, point) {
             return Some(HullFoot {
                 point,
                 normal,
@@ -216,28 +214,37 @@ impl HullPlanes {
             let m = if sa < sb { sa } else { sb };
             if m < sc { m } else { sc }
         });
-        let mut corner = 0;
-        for (j, p) in t.iter().enumerate() {
-            if self.signed(k, *p) == best {
-                corner = j;
-                break;
-            }
-        }
         if best >= reach {
             return Ok(None);
         }
         if best <= 0.0 {
             return Err(());
         }
-        let normal = glam::Vec3::new(self.nx[k], self.ny[k], self.nz[k]);
-        let point = t[corner] - normal * best;
-        let [a, b, c] = self.corners[k];
-        let left_of = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
-        if left_of(a, b) && left_of(b, c) && left_of(c, a) {
+        let corner = t
+            .iter()
+            .position(|p| self.signed(k, *p) == best)
+            .unwrap_or(0);
+        let normal = self.normal(k);
+        if self.holds(k, t[corner] - normal * best) {
             Ok(Some((corner, normal, best)))
         } else {
             Err(())
         }
+    }
+
+    /// Triangle `k`'s outward unit normal.
+    #[inline(always)]
+    fn normal(&self, k: usize) -> glam::Vec3 {
+        glam::Vec3::new(self.nx[k], self.ny[k], self.nz[k])
+    }
+
+    /// Whether `point`, on triangle `k`'s plane, lies in the triangle (on the inner side of
+    /// each of its edges).
+    #[inline(always)]
+    fn holds(&self, k: usize, point: glam::Vec3) -> bool {
+        let ([a, b, c], normal) = (self.corners[k], self.normal(k));
+        let left_of = |u: glam::Vec3, v: glam::Vec3| (v - u).cross(point - u).dot(normal) >= 0.0;
+        left_of(a, b) && left_of(b, c) && left_of(c, a)
     }
 
     /// The largest of `f(nx, ny, nz, w)` over the planes and the first plane giving it, in
