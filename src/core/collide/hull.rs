@@ -20,6 +20,14 @@
 //! random hulls its distance came out up to 3.1 mm off a brute-force distance over the
 //! triangles (the unit test that checks these answers against it prints the figure).
 //!
+//! The planes are not scanned one by one where a walk will do. Each triangle knows its
+//! three neighbours, and a cube map of directions about the hull's centre knows where to
+//! start: a walk from there to the neighbour farther out, while there is one, ends at a
+//! plane that settles most queries (any plane that settles one settles it exactly; a point
+//! the walk leaves unsettled is scanned, a cloth's triangle goes to parry's contact query).
+//! That query's support points come by the same kind of walk along the hull's edges, which
+//! for a support function on a convex polyhedron ends at the farthest vertex.
+//!
 //! The triangles are parry's convex hull of the polyhedron's vertices (parry's own
 //! `ConvexPolyhedron` merges triangles within about 1.5° into one face, with the first one's
 //! normal, so its faces' planes are not the hull's). Computing them costs about 100 µs for
