@@ -153,7 +153,8 @@ enum Fast {
         maxs: glam::Vec3,
         centre: glam::Vec3,
         radius: f32,
-        /// A convex polyhedron's triangles' planes, for its point queries without GJK.
+        /// A convex polyhedron's triangles' planes, for its point queries without GJK, and
+        /// its support points for the triangles' GJK.
         hull: Option<Arc<HullPlanes>>,
     },
 }
@@ -1936,7 +1937,7 @@ impl Collider {
             Fast::General { ref hull, .. } => {
                 // A convex polyhedron: first by its own triangles' planes (a separating
                 // plane, exact where its nearest corner's foot lies in its triangle), then
-                // parry's.
+                // parry's query on the hull's own support points.
                 if let Some(hull) = hull {
                     let local = tri.map(|p| pose.rotation.inverse() * (p - pose.origin).to_f32());
                     match hull.triangle(local, reach as f32) {
