@@ -416,8 +416,9 @@ impl HullPlanes {
 
     /// A walk over the triangles' neighbours from `from`, each step to the neighbour with
     /// the largest `f` if it is larger than the triangle's own, until none is: a local
-    /// maximum of `f` and its triangle. `f` increases strictly along the walk, so it ends;
-    /// where it does not reach the largest `f`, callers scan every plane.
+    /// maximum of `f` and its triangle. `f` increases strictly along the walk, so it ends.
+    /// Where its plane does not settle a query, a point's scans every plane and a
+    /// triangle's goes to parry.
     #[inline]
     fn climb(&self, f: impl Fn(usize) -> f32, from: usize) -> (f32, usize) {
         let (mut k, mut best) = (from, f(from));
