@@ -3,9 +3,10 @@
 //! of an icosphere (162 vertices) and as that icosphere's triangle mesh (320 triangles), at the
 //! pile's radius (0.3 m: the cloth drapes over it) and at 0.1 m (a small prop: most of the
 //! cloth falls past it). Balls have their own exact queries; a hull answers by its own
-//! triangles' planes (parry's contact query for a cloth's triangle that its planes do not
-//! settle), a mesh by parry's queries; both are skipped for particles outside the shape's
-//! box or bounding sphere grown by the thickness and their path. Time per frame of 1/60 s,
+//! triangles' planes (parry's contact query, on the hull's support points, for a cloth's
+//! triangle that its planes do not settle), a mesh by parry's point projection and exact
+//! triangle pairs; both are skipped for particles outside the shape's box or bounding
+//! sphere grown by the thickness and their path. Time per frame of 1/60 s,
 //! symplectic Euler at the pile's stable step and linearly implicit Euler at one step a
 //! frame; the clock starts at frame 30 (the cloth reaching the sphere) and the state is not
 //! reset between samples, so every sample is a frame of the same ongoing simulation.
