@@ -24,9 +24,13 @@
 //! three neighbours, and a cube map of directions about the hull's centre knows where to
 //! start: a walk from there to the neighbour farther out, while there is one, ends at a
 //! plane that settles most queries (any plane that settles one settles it exactly; a point
-//! the walk leaves unsettled is scanned, a cloth's triangle goes to parry's contact query).
-//! That query's support points come by the same kind of walk along the hull's edges, which
-//! for a support function on a convex polyhedron ends at the farthest vertex.
+//! the walk leaves unsettled is scanned). A cloth's triangle the walk leaves unsettled takes
+//! the exact closest points against each hull triangle that can hold its nearest point
+//! ([`HullPlanes::near_triangles`]: those near it in a hierarchy of boxes that it is not
+//! wholly behind); parry's GJK on a triangle and the polyhedron was up to 7 mm off. One that
+//! crosses the hull goes to parry's contact query for its depth, whose support points come
+//! by the same kind of walk along the hull's edges, which for a support function on a convex
+//! polyhedron ends at the farthest vertex.
 //!
 //! The triangles are parry's convex hull of the polyhedron's vertices (parry's own
 //! `ConvexPolyhedron` merges triangles within about 1.5° into one face, with the first one's
@@ -66,6 +70,9 @@ pub(super) struct HullPlanes {
     ring_at: Vec<u32>,
     ring: Vec<u32>,
     vertex_start: Vec<u32>,
+    /// The same triangles as a mesh (triangle `k` is plane `k`), for its hierarchy of boxes:
+    /// the triangles near a cloth's that no plane settles ([`HullPlanes::near_triangles`]).
+    mesh: Option<parry3d::shape::TriMesh>,
 }
 
 /// No neighbour (see [`HullPlanes`]'s `adjacent`).
@@ -119,6 +126,7 @@ impl HullPlanes {
             ring_at: Vec::new(),
             ring: Vec::new(),
             vertex_start: Vec::new(),
+            mesh: None,
         };
         // Which kept triangle each of parry's is (slivers are not kept).
         let mut kept = vec![NONE; tris.len()];
@@ -174,14 +182,7 @@ impl HullPlanes {
                 }
             }
         }
-        planes.start = (0..6 * CELLS * CELLS)
-            .map(|cell| {
-                let d = Self::cell_direction(cell);
-                (0..planes.corners.len())
-                    .max_by(|&i, &j| planes.normal(i).dot(d).total_cmp(&planes.normal(j).dot(d)))
-                    .unwrap_or(0) as u32
-            })
-            .collect();
+        planes.start = Self::cube_map(planes.corners.len(), |i| planes.normal(i));
         // The vertices' rings, from every triangle's edges (slivers' included: their edges
         // are the hull's).
         let mut links: Vec<(u32, u32)> = tris
@@ -196,15 +197,13 @@ impl HullPlanes {
             .map(|v| links.partition_point(|&(u, _)| (u as usize) < v) as u32)
             .collect();
         planes.ring = links.into_iter().map(|(_, w)| w).collect();
-        planes.vertex_start = (0..6 * CELLS * CELLS)
-            .map(|cell| {
-                let d = Self::cell_direction(cell);
-                (0..verts.len())
-                    .max_by(|&i, &j| verts[i].dot(d).total_cmp(&verts[j].dot(d)))
-                    .unwrap_or(0) as u32
-            })
-            .collect();
+        planes.vertex_start = Self::cube_map(verts.len(), |i| verts[i]);
         planes.vertices = verts;
+        let corners: Vec<glam::Vec3> = planes.corners.iter().flatten().copied().collect();
+        let indices = (0..planes.corners.len() as u32)
+            .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+            .collect();
+        planes.mesh = Some(parry3d::shape::TriMesh::new(corners, indices).ok()?);
         // Whole lanes: planes that put every point infinitely far inside.
         while !planes.w.len().is_multiple_of(LANES) {
             planes.nx.push(0.0);
@@ -312,18 +311,18 @@ impl HullPlanes {
     /// triangles' neighbours ([`HullPlanes::climb`]), from the triangle whose normal is
     /// nearest the direction of `t`'s first corner. Returns `Ok(None)` when the walk reaches
     /// a plane `reach` or more out, `Ok(Some((corner, normal, g)))` when its last plane
-    /// settles the distance (the outward normal, towards the triangle), `Err(())` otherwise:
+    /// settles the distance (the outward normal, towards the triangle), `Err(k)` otherwise:
     /// overlapping, nearest elsewhere (an edge against an edge, a hull's corner on the
-    /// triangle), or a walk ended short of the farthest plane; the caller then asks parry.
+    /// triangle), or a walk ended short of the farthest plane; the caller then takes the
+    /// exact pairs with [`HullPlanes::near_triangles`], from the walk's last triangle `k`.
     /// A scan of every plane after such a walk would settle almost none of them: over a 64²
     /// cloth draping on a 642-vertex hull, 22 of 1.38 million in short steps and 147 of
     /// 277,000 in frame-long ones, and no walk ended short of a plane out of reach.
-    #[allow(clippy::result_unit_err)]
     pub(super) fn triangle(
         &self,
         t: [glam::Vec3; 3],
         reach: f32,
-    ) -> Result<Option<(usize, glam::Vec3, f32)>, ()> {
+    ) -> Result<Option<(usize, glam::Vec3, f32)>, usize> {
         let [a, b, c] = t;
         let least = |k: usize| {
             let (sa, sb, sc) = (self.signed(k, a), self.signed(k, b), self.signed(k, c));
@@ -333,10 +332,54 @@ impl HullPlanes {
         if g >= reach {
             Ok(None)
         } else if g > 0.0 {
-            self.settle(t, k, g).map(Some).ok_or(())
+            self.settle(t, k, g).map(Some).ok_or(k)
         } else {
-            Err(())
+            Err(k)
         }
+    }
+
+    /// The hull's triangles that can hold the point nearest to triangle `t` (in the hull's
+    /// frame) when that is within `reach`: those whose boxes come within `reach` of `t`'s
+    /// (from the mesh's hierarchy), less those that `t` lies wholly behind. Why that is
+    /// enough: the nearest pair, `p` on `t` and `q` on the hull, lies along a unit direction
+    /// `n` in the normal cone at `q`, `n = Σ λ_f n_f` over the triangles at `q` with
+    /// `λ_f ≥ 0`. As `n · n = 1`, some triangle `f` at `q` has `n_f · n > 0`, and `p` is in
+    /// front of `f`'s plane by `|p − q| n_f · n > 0`, so `t` is not wholly behind it; and
+    /// `q` is within `reach` of `t`. A triangle that crosses `t` has corners of `t` on both
+    /// sides of its plane, so is among them too. Behind is widened by the planes' round-off.
+    ///
+    /// Triangle `first` comes first (the walk's last: often the nearest, so that the pairs
+    /// after it are bounded by its distance), then the others.
+    pub(super) fn near_triangles(
+        &self,
+        t: [glam::Vec3; 3],
+        reach: f32,
+        first: usize,
+    ) -> impl Iterator<Item = [glam::Vec3; 3]> + '_ {
+        let grow = glam::Vec3::splat(reach);
+        let lo = t[0].min(t[1]).min(t[2]) - grow;
+        let hi = t[0].max(t[1]).max(t[2]) + grow;
+        let size = lo.abs().max(hi.abs()).max_element();
+        let near = parry3d::bounding_volume::Aabb::new(lo, hi);
+        let boxed = self.mesh.iter().flat_map(move |mesh| {
+            use parry3d::bounding_volume::BoundingVolume;
+            mesh.bvh().leaves(move |node| node.aabb().intersects(&near))
+        });
+        let first = first.min(self.corners.len() - 1);
+        std::iter::once(first)
+            .chain(boxed.map(|id| id as usize).filter(move |k| *k != first))
+            .filter_map(move |k| {
+                let slack = 4.0 * f32::EPSILON * (3.0 * size + self.w[k].abs());
+                let front = t.iter().any(|p| self.signed(k, *p) > -slack);
+                front.then_some(self.corners[k])
+            })
+    }
+
+    /// Whether `p` (in the hull's frame) is inside every plane: in the hull or on it.
+    pub(super) fn contains(&self, p: glam::Vec3) -> bool {
+        self.farthest(|x, y, z, w| x * p.x + y * p.y + z * p.z - w)
+            .0
+            <= 0.0
     }
 
     /// Triangle `t`'s distance `g > 0` from plane `k` (its nearest corner's) settled as its
@@ -348,6 +391,19 @@ impl HullPlanes {
         let normal = self.normal(k);
         self.holds(k, t[corner] - normal * g)
             .then_some((corner, normal, g))
+    }
+
+    /// Per cube-map cell, the one of `count` items whose vector `along(i)` reaches farthest
+    /// along the cell's middle (a triangle's normal, a vertex's position).
+    fn cube_map(count: usize, along: impl Fn(usize) -> glam::Vec3) -> Vec<u32> {
+        (0..6 * CELLS * CELLS)
+            .map(|cell| {
+                let d = Self::cell_direction(cell);
+                (0..count)
+                    .max_by(|&i, &j| along(i).dot(d).total_cmp(&along(j).dot(d)))
+                    .unwrap_or(0) as u32
+            })
+            .collect()
     }
 
     /// The middle of cube-map cell `cell`, as a unit direction: face `cell / CELLS²` (the
@@ -418,7 +474,7 @@ impl HullPlanes {
     /// the largest `f` if it is larger than the triangle's own, until none is: a local
     /// maximum of `f` and its triangle. `f` increases strictly along the walk, so it ends.
     /// Where its plane does not settle a query, a point's scans every plane and a
-    /// triangle's goes to parry.
+    /// triangle's takes the exact pairs with [`HullPlanes::near_triangles`].
     #[inline]
     fn climb(&self, f: impl Fn(usize) -> f32, from: usize) -> (f32, usize) {
         let (mut k, mut best) = (from, f(from));
