@@ -3,9 +3,9 @@
 //! of an icosphere (162 vertices) and as that icosphere's triangle mesh (320 triangles), at the
 //! pile's radius (0.3 m: the cloth drapes over it) and at 0.1 m (a small prop: most of the
 //! cloth falls past it). Balls have their own exact queries; a hull answers by its own
-//! triangles' planes (parry's contact query, on the hull's support points, for a cloth's
-//! triangle that its planes do not settle), a mesh by parry's point projection and exact
-//! triangle pairs; both are skipped for particles outside the shape's box or bounding
+//! triangles' planes, and a cloth's triangle they do not settle by exact pairs with the hull's
+//! triangles near it (parry's contact query, on the hull's support points, for one crossing
+//! it); a mesh by parry's point projection and exact triangle pairs; both are skipped for particles outside the shape's box or bounding
 //! sphere grown by the thickness and their path. Time per frame of 1/60 s,
 //! symplectic Euler at the pile's stable step and linearly implicit Euler at one step a
 //! frame. The cost of a frame depends on how far the cloth has draped, so the timed frames are
