@@ -1942,7 +1942,7 @@ impl Collider {
                 // exact pairs, and a pair's closest points there as the contact.
                 let rot = glam::DQuat::from_array(pose.rotation.to_array().map(f64::from));
                 let o = d(pose.origin);
-                let local = tri.map(|p| rot.inverse() * (d(p) - o));
+                let local64 = || tri.map(|p| rot.inverse() * (d(p) - o));
                 let contact = |(on_tri, on_shape): (glam::DVec3, glam::DVec3)| {
                     let off = on_tri - on_shape;
                     let dist = off.length();
@@ -1951,7 +1951,7 @@ impl Collider {
                     Some((bary_of(point), point, n, dist as Scalar))
                 };
                 if let Some(hull) = hull {
-                    let local = local.map(|p| p.as_vec3());
+                    let local = tri.map(|p| pose.rotation.inverse() * (p - pose.origin).to_f32());
                     let last = match hull.triangle(local, reach as f32) {
                         Ok(None) => return None,
                         Ok(Some((corner, n, dist))) => {
@@ -1970,7 +1970,7 @@ impl Collider {
                     // hull or inside it, parry's query for the depth.
                     let near = hull.near_triangles(local, reach as f32, last);
                     let near = near.map(|c| c.map(|p| p.as_dvec3()));
-                    match nearest_of_triangles(local.map(|p| p.as_dvec3()), near, reach as f64) {
+                    match nearest_of_triangles(local64(), near, reach as f64) {
                         Ok(Some(pair)) => return contact(pair),
                         Ok(None) if !hull.contains(local[0]) => return None,
                         _ => {}
@@ -1980,7 +1980,7 @@ impl Collider {
                     // A triangle mesh: its triangles near this one, each pair's distance
                     // exactly (parry's GJK on two triangles is millimetres off near a
                     // mesh); crossing any, parry's query for the depth.
-                    return match mesh_triangle_closest(mesh, local, reach as f64) {
+                    return match mesh_triangle_closest(mesh, local64(), reach as f64) {
                         Err(()) => self.face_contact_parry(shape_pose, reach, tri, None),
                         Ok(None) => None,
                         Ok(Some(pair)) => contact(pair),
@@ -3271,6 +3271,25 @@ mod tests {
         (if outside { best } else { -best }, foot)
     }
 
+    /// A random triangle of `mesh` (its corners) and a point uniformly in it, from `rnd`'s
+    /// numbers in `[-1, 1]`: the triangle, then the point's two coordinates (folded into the
+    /// triangle where they sum past 1).
+    fn random_point_on(
+        mesh: &(Vec<glam::Vec3>, Vec<[u32; 3]>),
+        rnd: &mut impl FnMut() -> f32,
+    ) -> ([glam::Vec3; 3], glam::Vec3) {
+        let (v, tris) = mesh;
+        let pick = ((rnd().abs() * tris.len() as f32) as usize).min(tris.len() - 1);
+        let [p0, p1, p2] = tris[pick].map(|i| v[i as usize]);
+        let (r0, r1) = (rnd().abs(), rnd().abs());
+        let (r0, r1) = if r0 + r1 > 1.0 {
+            (1.0 - r0, 1.0 - r1)
+        } else {
+            (r0, r1)
+        };
+        ([p0, p1, p2], p0 + (p1 - p0) * r0 + (p2 - p0) * r1)
+    }
+
     /// The distance between triangle `t` and a convex hull (as [`hull_distance`] takes it),
     /// by brute force in `f64`: the least over the hull's triangles of the closest points of
     /// each edge of either triangle against the other (`triangle_segment_closest`: two
@@ -3330,16 +3349,8 @@ mod tests {
                 // A cell of a cloth lying on or over the hull: a point up to 4 cm out from
                 // a random point of one of its triangles, and a small triangle about it
                 // along that triangle, tilted by up to a millimetre at its corners.
-                let (v, tris) = &reference;
-                let pick = ((rnd().abs() * tris.len() as f32) as usize).min(tris.len() - 1);
-                let [p0, p1, p2] = tris[pick].map(|i| v[i as usize]);
-                let (r0, r1) = (rnd().abs(), rnd().abs());
-                let (r0, r1) = if r0 + r1 > 1.0 {
-                    (1.0 - r0, 1.0 - r1)
-                } else {
-                    (r0, r1)
-                };
-                let on = p0 + (p1 - p0) * r0 + (p2 - p0) * r1;
+                let v = &reference.0;
+                let ([p0, p1, p2], on) = random_point_on(&reference, &mut rnd);
                 let normal = (p1 - p0).cross(p2 - p0).normalize();
                 let normal = if normal
                     .dot(p0 - v.iter().copied().sum::<glam::Vec3>() / v.len() as f32)
@@ -3440,15 +3451,7 @@ mod tests {
             let reference = (v.clone(), tris.clone());
             let cells: Vec<[glam::Vec3; 3]> = (0..300)
                 .map(|_| {
-                    let pick = ((rnd().abs() * tris.len() as f32) as usize).min(tris.len() - 1);
-                    let [p0, p1, p2] = tris[pick].map(|i| v[i as usize]);
-                    let (r0, r1) = (rnd().abs(), rnd().abs());
-                    let (r0, r1) = if r0 + r1 > 1.0 {
-                        (1.0 - r0, 1.0 - r1)
-                    } else {
-                        (r0, r1)
-                    };
-                    let on = p0 + (p1 - p0) * r0 + (p2 - p0) * r1;
+                    let ([p0, p1, p2], on) = random_point_on(&reference, &mut rnd);
                     let up = (p1 - p0).cross(p2 - p0).normalize();
                     let centre = on + up * (0.04 * rnd());
                     let cell = 0.01 + 0.02 * rnd().abs();
