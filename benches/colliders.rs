@@ -5,10 +5,10 @@
 //! cloth falls past it). Balls have their own exact queries; a hull answers by its own
 //! triangles' planes, and a cloth's triangle they do not settle by exact pairs with the hull's
 //! triangles near it (parry's contact query, on the hull's support points, for one crossing
-//! it); a mesh by parry's point projection and exact triangle pairs; both are skipped for particles outside the shape's box or bounding
-//! sphere grown by the thickness and their path. Time per frame of 1/60 s,
-//! symplectic Euler at the pile's stable step and linearly implicit Euler at one step a
-//! frame. The cost of a frame depends on how far the cloth has draped, so the timed frames are
+//! it); a mesh by parry's point projection and exact triangle pairs; both are skipped for
+//! particles outside the shape's box or bounding sphere grown by the thickness and their
+//! path. Time per frame of 1/60 s, symplectic Euler at the pile's stable step and linearly
+//! implicit Euler at one step a frame. The cost of a frame depends on how far the cloth has draped, so the timed frames are
 //! always frames 30 to 59 of the same run (the cloth reaching the sphere and draping on it),
 //! taken in turn: after the 60th the state of frame 30 is put back, untimed. Criterion's
 //! figure is then their mean whatever the number of frames it asks for (a run that went on
