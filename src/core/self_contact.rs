@@ -458,11 +458,18 @@ struct Scratch {
     epoch: Epochs,
     zone_sum: Vec<ZoneSum>,
     broad_valid: bool,
-    /// Per particle: how far it may travel relative to the surface's mean motion before the
-    /// next pass is due (infinite: in no candidate pair), and how far it has since the last
-    /// pass.
+    /// Per particle: how far it may stray from the motion it had at the last pass's end
+    /// before the next pass is due, less `slope` times the time since (infinite: in no
+    /// candidate pair); and its path over the pass (scratch, while the budgets are set).
     budget: Vec<Scalar>,
     travel: Vec<Scalar>,
+    /// Per particle: how fast its budget shrinks after the pass (half the largest
+    /// [`spread`] of the end velocities of a pair it is in), and its end velocity; the
+    /// surface's mean position and velocity at the pass's end.
+    slope: Vec<Scalar>,
+    vref: Vec<Vector>,
+    mean_xref: Vector,
+    mean_vref: Vector,
     /// Per particle, as of the last search: where it was at the end of that pass and its
     /// velocity then relative to the surface's mean (its motion is expected to stay within
     /// [`BROAD_GROW`] thicknesses of `base + w τ` for `τ` up to `tube_len` after that
@@ -616,44 +623,58 @@ impl SelfContact {
         self.start.clear();
         self.start.extend_from_slice(x);
         self.since = 0.0;
+        // The reference of the strays (see [`SelfContact::advance`]): the last pass's end,
+        // unless the positions were changed since.
+        let verts = &self.surface.vertices;
+        if verts.last().is_some_and(|&i| (i as usize) < x.len()) {
+            let sum = verts.iter().fold(Vector::ZERO, |a, &i| a + x[i as usize]);
+            self.s.mean_xref = sum / verts.len() as Scalar;
+        }
     }
 
     /// After a step of length `h` to positions `x` with end velocities `v`: true when a pass
     /// is due. A candidate pair (one the last search found) at distance `d` when the last
     /// pass ended is due once its parts may have come `max(d − PROXIMITY·thickness, 0) +
-    /// PASS_TRAVEL·thickness` closer (each of its particles' speeds relative to the surface's
-    /// mean velocity summed over the steps is held to half that), so every pass sees the
-    /// pairs in its proximity band come at most [`PASS_TRAVEL`] thicknesses closer whatever
-    /// the step; and a pass is due when a surface vertex has strayed from the motion it had
-    /// at the last search, or that search's horizon has passed (see [`AHEAD`]), since pairs
-    /// which are not candidates may then come near. Parts of the surface far from each other
-    /// need no pass however fast they move.
+    /// PASS_TRAVEL·thickness` closer (each particle's stray from where its end velocity
+    /// would have taken it, relative to the surface's mean, plus half the speed at which its
+    /// pairs' parts then approached times the time since, is held to half that), so every
+    /// pass sees the pairs in its proximity band come at most [`PASS_TRAVEL`] thicknesses
+    /// closer whatever the step; and a pass is due when a surface vertex has strayed from the
+    /// motion it had at the last search, or that search's horizon has passed (see
+    /// [`AHEAD`]), since pairs which are not candidates may then come near. Parts of the
+    /// surface far from each other need no pass however fast they move, and parts at rest
+    /// none however fast others move past them.
     pub fn advance(&mut self, h: Scalar, x: &[Vector], v: &[Vector]) -> bool {
         if self.start.len() != v.len() || x.len() != v.len() || self.surface.triangles.is_empty() {
             return false;
         }
-        // Two parts approach at most at |v_a − c| + |v_b − c| for any common velocity c: the
-        // mean one makes a body that falls or slides as a whole count as still.
         let verts = &self.surface.vertices;
-        let (mut sum_v, mut sum_x) = (Vector::ZERO, Vector::ZERO);
+        let mut sum_x = Vector::ZERO;
         for &i in verts {
-            sum_v += v[i as usize];
             sum_x += x[i as usize];
         }
-        let n = verts.len().max(1) as Scalar;
-        let (mean_v, mean_x) = (sum_v / n, sum_x / n);
+        let mean_x = sum_x / verts.len().max(1) as Scalar;
         self.since += h;
         let s = &mut self.s;
         let tau = s.clock + self.since as f64;
-        if s.budget.len() != v.len() || s.tube_s.len() != x.len() || tau > s.tube_len {
+        if s.budget.len() != v.len()
+            || s.vref.len() != v.len()
+            || s.tube_s.len() != x.len()
+            || tau > s.tube_len
+        {
             return true;
         }
+        // Each particle's departure from where its velocity at the last pass's end would
+        // have taken it, less the mean's (a motion common to the surface brings no two
+        // parts closer).
+        let since = self.since;
+        let dm = mean_x - s.mean_xref - s.mean_vref * since;
+        let start = &self.start;
         let mut due = false;
         for &i in verts {
             let i = i as usize;
-            let t = s.travel[i] + (v[i] - mean_v).length() * h;
-            s.travel[i] = t;
-            due |= t > s.budget[i];
+            let stray = (x[i] - start[i] - s.vref[i] * since - dm).length();
+            due |= stray + s.slope[i] * since > s.budget[i];
         }
         // Each vertex within its tube as the pass's check reads it, but in `Scalar`: a vertex
         // that round-off keeps inside a little longer only makes the pass later, and the pass
@@ -852,8 +873,22 @@ impl SelfContact {
             let i = i as usize;
             s.travel[i] = (s.u[i].length() * h) as Scalar;
         }
+        // After the pass a pair's parts come closer by no more than the largest difference of
+        // the end velocities of a vertex of one and one of the other ([`spread`]) times the
+        // time since, plus how far a vertex of each has strayed from where its own end
+        // velocity would have taken it (a motion common to the whole surface taken out): for
+        // points `Σ aᵢxᵢ` and `Σ bⱼyⱼ` of the parts, `Δ(Σ aᵢxᵢ − Σ bⱼyⱼ) = τ Σᵢⱼ aᵢbⱼ (vᵢ − vⱼ) +
+        // Σ aᵢsᵢ − Σ bⱼsⱼ` with `sₖ` the strays. So each particle's budget shrinks at half
+        // that speed (`slope`: the largest over its pairs) and is spent by its stray (see
+        // [`SelfContact::advance`]). A part at rest beside one that slides or falls spends
+        // nothing, where speeds measured from the surface's mean velocity spent its budget at
+        // the mean's speed.
+        s.vref.clear();
+        s.vref.extend_from_slice(v);
         s.budget.clear();
         s.budget.resize(n, Scalar::INFINITY);
+        s.slope.clear();
+        s.slope.resize(n, 0.0);
         let (near, band) = (PROXIMITY * ctx.thick, PASS_TRAVEL * ctx.thick);
         for &(pair, d0) in &s.pairs {
             let ids = pair.ids();
@@ -863,12 +898,34 @@ impl SelfContact {
                 Pair::EdgeEdge(..) => a.max(b) + c.max(d),
             } as f64;
             let half = (0.5 * ((d0 - closing - near).max(0.0) + band)) as Scalar;
+            // Squared here, halved and rooted once per particle below.
+            let [va, vb, vc, vd] = ids.map(|i| s.vref[i as usize]);
+            let rate2 = match pair {
+                Pair::PointTriangle(..) => (va - vb)
+                    .length_squared()
+                    .max((va - vc).length_squared())
+                    .max((va - vd).length_squared()),
+                Pair::EdgeEdge(..) => ((va - vc).length_squared())
+                    .max((va - vd).length_squared())
+                    .max((vb - vc).length_squared())
+                    .max((vb - vd).length_squared()),
+            };
             for i in ids {
-                let m = &mut s.budget[i as usize];
-                *m = m.min(half);
+                let i = i as usize;
+                s.budget[i] = s.budget[i].min(half);
+                s.slope[i] = s.slope[i].max(rate2);
             }
         }
-        s.travel.fill(0.0);
+        for r in &mut s.slope {
+            *r = 0.5 * r.sqrt();
+        }
+        let (mut sum_x, mut sum_v) = (Vector::ZERO, Vector::ZERO);
+        for &i in &self.surface.vertices {
+            sum_x += x[i as usize];
+            sum_v += v[i as usize];
+        }
+        let nv = self.surface.vertices.len().max(1) as Scalar;
+        (s.mean_xref, s.mean_vref) = (sum_x / nv, sum_v / nv);
         rep.searches = s.searches - searches;
         rep.tested = s.tested - tested;
         rep.resumed = s.resumed - resumed;
@@ -2033,6 +2090,117 @@ mod tests {
         assert!((least - 0.75).abs() < 1e-15, "{least}");
         let end = part_distance(pair, [0, 1, 2, 3].map(|i| p0[i] + u[i] * h));
         assert!((end - (1.0 - least)).abs() < 1e-15, "{end}");
+    }
+
+    /// Two 6 × 6 sheets of 1 cm cells in the plane z = 0 and the plane `gap` above it, the
+    /// upper one turned 20° about z and shifted, so that their pairs are of every kind.
+    fn two_sheets(gap: f64) -> (ContactSurface, Vec<DVec3>) {
+        let (n, edge) = (6u32, 0.01);
+        let mut triangles = vec![];
+        let mut x = vec![];
+        for sheet in 0..2 {
+            let base = sheet * n * n;
+            let (c, s) = (20f64.to_radians().cos(), 20f64.to_radians().sin());
+            for j in 0..n {
+                for i in 0..n {
+                    let (a, b) = (i as f64 * edge, j as f64 * edge);
+                    x.push(if sheet == 0 {
+                        DVec3::new(a, b, 0.0)
+                    } else {
+                        DVec3::new(c * a - s * b + 0.012, s * a + c * b - 0.004, gap)
+                    });
+                }
+            }
+            for j in 0..n - 1 {
+                for i in 0..n - 1 {
+                    let k = base + j * n + i;
+                    triangles.push([k, k + 1, k + n + 1]);
+                    triangles.push([k, k + n + 1, k + n]);
+                }
+            }
+        }
+        (ContactSurface::new(&triangles), x)
+    }
+
+    #[test]
+    fn no_pass_is_due_before_a_candidate_pair_may_have_closed_its_allowance() {
+        // A pass sets each particle's budget; then the particles follow curved paths (their
+        // end velocities, each its own acceleration) on a fast common motion (a fall and a
+        // drift, which brings no two parts closer). Until `advance` says a pass is due, a
+        // candidate pair within the proximity band at the pass's end has come at most
+        // PASS_TRAVEL thicknesses closer, and any other stays out of the band by as much
+        // less. The upper sheet sinks towards the lower at a steady speed, which strays from
+        // nothing: only the pairs' approach speed at the pass's end makes their pass due
+        // (the test fails with `slope` left at zero).
+        let thick = 0.004;
+        let (near, band) = (PROXIMITY * thick, PASS_TRAVEL * thick);
+        let mut rnd = crate::math::test_rng(4242u64);
+        for _ in 0..20 {
+            // 2.5 thicknesses apart at the pass's end: out of the band, within the search's reach.
+            let (hp, sink) = (0.1, 0.05);
+            let (surface, p) = two_sheets(2.5 * thick + sink * hp);
+            let nv = p.len();
+            let mut sc = SelfContact::new(
+                surface,
+                SelfContactParams {
+                    thickness: thick,
+                    friction: 0.3,
+                },
+            );
+            let jitter = |rnd: &mut dyn FnMut() -> f64, m: f64| DVec3::new(rnd(), rnd(), rnd()) * m;
+            let vel: Vec<DVec3> = (0..nv)
+                .map(|i| {
+                    let down = if i >= nv / 2 { -sink } else { 0.0 };
+                    DVec3::new(0.0, 0.0, down) + jitter(&mut rnd, 0.005)
+                })
+                .collect();
+            let acc: Vec<DVec3> = (0..nv).map(|_| jitter(&mut rnd, 0.2)).collect();
+            let x0: Vec<Vector> = p.iter().map(|&q| from_d(q)).collect();
+            let mut x: Vec<Vector> = (0..nv).map(|i| from_d(p[i] + vel[i] * hp)).collect();
+            let mut v: Vec<Vector> = vel.iter().map(|&q| from_d(q)).collect();
+            sc.begin_frame(&x0);
+            assert!(sc.advance(hp as Scalar, &x, &v), "the first pass is due");
+            sc.pass(&mut x, &mut v, &vec![1.0; nv]);
+            assert_eq!(
+                sc.last.proximity + sc.last.separated + sc.last.collisions,
+                0
+            );
+            let at = |x: &[Vector], pair: Pair| {
+                part_distance(pair, pair.ids().map(|i| to_d(x[i as usize])))
+            };
+            let pairs: Vec<(Pair, f64)> =
+                sc.s.pairs
+                    .iter()
+                    .map(|&(pair, _)| (pair, at(&x, pair)))
+                    .collect();
+            let across = pairs.iter().filter(|(pair, _)| {
+                let ids = pair.ids();
+                (ids[0] as usize >= nv / 2) != (ids[3] as usize >= nv / 2)
+            });
+            assert!(across.count() > 100, "{} candidates", pairs.len());
+            let (xe, ve) = (x.clone(), v.clone());
+            let dt = 1e-3;
+            let mut free = 0;
+            for k in 1..=1000 {
+                let t = k as f64 * dt;
+                let common = DVec3::new(2.0 * t, -9.0 * t - 4.9 * t * t, 0.5 * t);
+                let common_v = DVec3::new(2.0, -9.0 - 9.8 * t, 0.5);
+                for i in 0..nv {
+                    x[i] = from_d(to_d(xe[i]) + to_d(ve[i]) * t + 0.5 * acc[i] * t * t + common);
+                    v[i] = from_d(to_d(ve[i]) + acc[i] * t + common_v);
+                }
+                if sc.advance(dt as Scalar, &x, &v) {
+                    break;
+                }
+                free = k;
+                for &(pair, end) in &pairs {
+                    let d = at(&x, pair);
+                    assert!(d >= end.min(near) - band - 1e-6, "τ = {t}: {d} from {end}");
+                }
+            }
+            // Not at once (a pass is due when the budgets are spent, not before).
+            assert!(free >= 20, "{free} steps");
+        }
     }
 
     #[test]
