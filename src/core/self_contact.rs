@@ -627,8 +627,7 @@ impl SelfContact {
         // unless the positions were changed since.
         let verts = &self.surface.vertices;
         if verts.last().is_some_and(|&i| (i as usize) < x.len()) {
-            let sum = verts.iter().fold(Vector::ZERO, |a, &i| a + x[i as usize]);
-            self.s.mean_xref = sum / verts.len() as Scalar;
+            self.s.mean_xref = mean_of(verts, x);
         }
     }
 
@@ -649,11 +648,7 @@ impl SelfContact {
             return false;
         }
         let verts = &self.surface.vertices;
-        let mut sum_x = Vector::ZERO;
-        for &i in verts {
-            sum_x += x[i as usize];
-        }
-        let mean_x = sum_x / verts.len().max(1) as Scalar;
+        let mean_x = mean_of(verts, x);
         self.since += h;
         let s = &mut self.s;
         let tau = s.clock + self.since as f64;
@@ -919,13 +914,8 @@ impl SelfContact {
         for r in &mut s.slope {
             *r = 0.5 * r.sqrt();
         }
-        let (mut sum_x, mut sum_v) = (Vector::ZERO, Vector::ZERO);
-        for &i in &self.surface.vertices {
-            sum_x += x[i as usize];
-            sum_v += v[i as usize];
-        }
-        let nv = self.surface.vertices.len().max(1) as Scalar;
-        (s.mean_xref, s.mean_vref) = (sum_x / nv, sum_v / nv);
+        let verts = &self.surface.vertices;
+        (s.mean_xref, s.mean_vref) = (mean_of(verts, x), mean_of(verts, v));
         rep.searches = s.searches - searches;
         rep.tested = s.tested - tested;
         rep.resumed = s.resumed - resumed;
@@ -1032,6 +1022,15 @@ fn spread(pair: Pair, v: [DVec3; 4]) -> f64 {
             .max(apart(1, 3)),
     }
     .sqrt()
+}
+
+/// The mean of `x` over the particles `verts` (zero for none).
+fn mean_of(verts: &[u32], x: &[Vector]) -> Vector {
+    let mut sum = Vector::ZERO;
+    for &i in verts {
+        sum += x[i as usize];
+    }
+    sum / verts.len().max(1) as Scalar
 }
 
 /// Kinetic energy of the free particles among `verts`.
