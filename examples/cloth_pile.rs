@@ -115,10 +115,10 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
         PRECISION
     );
     println!(
-        "| scene | method | frames | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones |"
+        "| scene | method | frames | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones | passes due by budget / tube / horizon / frame end | particle making most passes due (passes) |"
     );
     println!(
-        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"
+        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |"
     );
     let se = IntegratorKind::SymplecticEuler;
     let lie = IntegratorKind::LinearlyImplicitEuler;
@@ -146,15 +146,20 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
             let scene = cloth_pile(&p).expect("valid pile");
             let (model, state) = scene.build().expect("valid scene");
             let (sim, wall, steps) = timed(model, state, method, &p, frames, threads);
-            let r = sim
-                .system
-                .self_contact
-                .as_ref()
-                .map_or(SelfContactReport::default(), |c| c.total);
+            let sc = sim.system.self_contact.as_ref();
+            let r = sc.map_or(SelfContactReport::default(), |c| c.total);
+            // What made the passes due, and the particle that made most of them due.
+            let busiest = sc
+                .and_then(|c| {
+                    let counts = c.due_counts().iter().enumerate().filter(|&(_, &n)| n > 0);
+                    counts.max_by_key(|&(i, &n)| (n, std::cmp::Reverse(i)))
+                })
+                .map_or("–".to_string(), |(i, n)| format!("{i} ({n})"));
+            let frame_end = r.passes_run - r.due_budget - r.due_tube - r.due_horizon;
             let per = |d: Duration| d.as_secs_f64() * 1e6 / steps as f64;
             let pf = |k: u32| k as f64 / frames as f64;
             println!(
-                "| {cloths} × {n}² | {} | {frames} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} |",
+                "| {cloths} × {n}² | {} | {frames} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} | {} / {} / {} / {frame_end} | {busiest} |",
                 method.label(),
                 if on { "on" } else { "off" },
                 per(wall),
@@ -166,7 +171,10 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
                 r.candidates,
                 r.proximity as f64 / r.passes_run.max(1) as f64,
                 r.collisions,
-                r.zones
+                r.zones,
+                r.due_budget,
+                r.due_tube,
+                r.due_horizon
             );
         }
     }

@@ -281,6 +281,21 @@ pub struct SelfContactReport {
     pub collisions: u32,
     /// Passes run (each: proximity, separation, continuous detection).
     pub passes_run: u32,
+    /// Passes that ran because a particle had strayed past its budget (a candidate pair may
+    /// have closed its allowance: see [`SelfContact::advance`]). With
+    /// [`SelfContactReport::due_tube`] and [`SelfContactReport::due_horizon`], what made
+    /// passes due; the rest of [`SelfContactReport::passes_run`] ran at a frame's end.
+    pub due_budget: u32,
+    /// Passes that ran because a surface vertex had left the tube around the motion it had
+    /// at the last search (pairs which are not candidates may have come near).
+    pub due_tube: u32,
+    /// Passes that ran because the last search's horizon had passed (or no pass had run
+    /// yet, or the surface changed).
+    pub due_horizon: u32,
+    /// The particle that made this pass due (the one furthest past its budget, or the first
+    /// out of its tube); none for a pass due by the horizon or at a frame's end. In totals,
+    /// the last pass's. [`SelfContact::due_counts`] counts them per particle.
+    pub due_particle: Option<u32>,
     /// Continuous-detection sweeps run (one or more per pass).
     pub passes: u32,
     /// Impact zones formed (the fail-safe; usually zero).
@@ -315,6 +330,10 @@ impl SelfContactReport {
         self.collisions += o.collisions;
         self.passes += o.passes;
         self.passes_run += o.passes_run;
+        self.due_budget += o.due_budget;
+        self.due_tube += o.due_tube;
+        self.due_horizon += o.due_horizon;
+        self.due_particle = o.due_particle;
         self.zones += o.zones;
         self.failed |= o.failed;
         self.failures += o.failures;
@@ -409,7 +428,25 @@ pub struct SelfContact {
     since: Scalar,
     /// Particles resting on colliders (empty: none marked).
     support: Vec<bool>,
+    /// Why the next pass is due, as [`SelfContact::advance`] found it.
+    due: Due,
+    /// Per particle, the passes it made due (see [`SelfContact::due_counts`]).
+    due_counts: Vec<u32>,
     s: Scratch,
+}
+
+/// What made a pass due (see [`SelfContact::advance`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+enum Due {
+    /// Not due: a pass now is the frame's end.
+    #[default]
+    FrameEnd,
+    /// A particle strayed past its budget.
+    Budget(u32),
+    /// A vertex left its tube.
+    Tube(u32),
+    /// The search's horizon passed (or the budgets are not set).
+    Horizon,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -650,6 +687,7 @@ impl SelfContact {
         let verts = &self.surface.vertices;
         let mean_x = mean_of(verts, x);
         self.since += h;
+        self.due = Due::FrameEnd;
         let s = &mut self.s;
         let tau = s.clock + self.since as f64;
         if s.budget.len() != v.len()
@@ -657,6 +695,7 @@ impl SelfContact {
             || s.tube_s.len() != x.len()
             || tau > s.tube_len
         {
+            self.due = Due::Horizon;
             return true;
         }
         // Each particle's departure from where its velocity at the last pass's end would
@@ -665,21 +704,47 @@ impl SelfContact {
         let since = self.since;
         let dm = mean_x - s.mean_xref - s.mean_vref * since;
         let start = &self.start;
+        let over = |i: usize| {
+            let stray = (x[i] - start[i] - s.vref[i] * since - dm).length();
+            stray + s.slope[i] * since - s.budget[i]
+        };
         let mut due = false;
         for &i in verts {
-            let i = i as usize;
-            let stray = (x[i] - start[i] - s.vref[i] * since - dm).length();
-            due |= stray + s.slope[i] * since > s.budget[i];
+            due |= over(i as usize) > 0.0;
+        }
+        if due {
+            // Named for the report: the particle furthest past its budget (looked for only
+            // when a pass is due, once per pass).
+            let (mut worst, mut most) = (0, Scalar::NEG_INFINITY);
+            for &i in verts {
+                let o = over(i as usize);
+                if o > most {
+                    (worst, most) = (i, o);
+                }
+            }
+            self.due = Due::Budget(worst);
+            return true;
         }
         // Each vertex within its tube as the pass's check reads it, but in `Scalar`: a vertex
         // that round-off keeps inside a little longer only makes the pass later, and the pass
         // checks exactly.
         let (d, tau) = (mean_x - s.tube_ref_s, tau as Scalar);
         let g = Vector::splat((BROAD_GROW * self.params.thickness) as Scalar);
-        due || !verts.iter().all(|&i| {
+        let out = verts.iter().find(|&&i| {
             let (base, w) = s.tube_s[i as usize];
-            (x[i as usize] - d - (base + w * tau)).abs().cmple(g).all()
-        })
+            !(x[i as usize] - d - (base + w * tau)).abs().cmple(g).all()
+        });
+        self.due = out.map_or(Due::FrameEnd, |&i| Due::Tube(i));
+        out.is_some()
+    }
+
+    /// Per particle, the passes it made due since the handler was made: by straying past its
+    /// budget or leaving its tube (see [`SelfContactReport::due_particle`]). A few particles
+    /// with most of the count are where the passes' cost comes from: typically a crease
+    /// pressed together by its springs and held apart by the thickness, whose particles the
+    /// springs drive into their contacts again after every pass.
+    pub fn due_counts(&self) -> &[u32] {
+        &self.due_counts
     }
 
     /// True when steps were taken since the last pass (the frame's end then needs one, so
@@ -705,6 +770,26 @@ impl SelfContact {
         let start = std::mem::take(&mut self.start);
         self.resolve(self.since, &start, x, v, inv_mass);
         self.start = start;
+        let due = std::mem::take(&mut self.due);
+        let (last, total) = (&mut self.last, &mut self.total);
+        match due {
+            Due::FrameEnd => {}
+            Due::Budget(_) => (last.due_budget, total.due_budget) = (1, total.due_budget + 1),
+            Due::Tube(_) => (last.due_tube, total.due_tube) = (1, total.due_tube + 1),
+            Due::Horizon => (last.due_horizon, total.due_horizon) = (1, total.due_horizon + 1),
+        }
+        let particle = match due {
+            Due::Budget(i) | Due::Tube(i) => Some(i),
+            _ => None,
+        };
+        (last.due_particle, total.due_particle) = (particle, particle);
+        // Sized at the first pass (always due by the horizon), so no later step allocates.
+        if self.due_counts.len() < x.len() {
+            self.due_counts.resize(x.len(), 0);
+        }
+        if let Some(i) = particle {
+            self.due_counts[i as usize] += 1;
+        }
         self.start.copy_from_slice(x);
         self.since = 0.0;
         self.support.clear();
@@ -2200,6 +2285,97 @@ mod tests {
             // Not at once (a pass is due when the budgets are spent, not before).
             assert!(free >= 20, "{free} steps");
         }
+    }
+
+    #[test]
+    fn a_pass_names_what_made_it_due() {
+        // Everything at rest after a first pass; then one thing at a time that makes the next
+        // pass due, each named in the pass's report: a particle moved past its budget (the
+        // one furthest past it named), a vertex out of its tube, the horizon, and a frame's
+        // end with nothing due.
+        let thick = 0.004;
+        let (surface, p) = two_sheets(2.5 * thick);
+        let nv = p.len();
+        let params = SelfContactParams {
+            thickness: thick,
+            friction: 0.3,
+        };
+        let mut sc = SelfContact::new(surface, params);
+        let x0: Vec<Vector> = p.iter().map(|&q| from_d(q)).collect();
+        let (mut x, mut v) = (x0.clone(), vec![Vector::ZERO; nv]);
+        let w = vec![1.0; nv];
+        let hp: Scalar = 1e-3;
+        sc.begin_frame(&x0);
+        // No budgets yet: due as at the horizon.
+        assert!(sc.advance(hp, &x, &v));
+        sc.pass(&mut x, &mut v, &w);
+        assert_eq!((sc.last.due_horizon, sc.last.due_particle), (1, None));
+        // Two particles of the upper sheet pushed down towards the lower: 2.5 thicknesses
+        // apart at rest, a pair's allowance is (2.5 − PROXIMITY + PASS_TRAVEL) thicknesses,
+        // each particle's budget half that (1.5 · 4 mm / 2 = 3 mm). Both go past it; the
+        // second further.
+        let (a, b) = (nv / 2 + 14, nv / 2 + 21);
+        let budget = 0.5 * (2.5 - PROXIMITY + PASS_TRAVEL) * thick;
+        let mut moved = x.clone();
+        moved[a].z -= (budget + 0.2e-3) as Scalar;
+        moved[b].z -= (budget + 0.5e-3) as Scalar;
+        assert!(sc.advance(hp, &moved, &v));
+        sc.pass(&mut moved, &mut v, &w);
+        assert_eq!(
+            (sc.last.due_budget, sc.last.due_particle),
+            (1, Some(b as u32))
+        );
+        // Moved within its budget (a quarter of it, the others still) over a short step (the
+        // search of that pass set the two particles' tubes going down at the speed they
+        // came): nothing is due, and the pass then is a frame's end.
+        let mut within = moved;
+        within[a].z -= (0.25 * budget) as Scalar;
+        assert!(!sc.advance(0.1 * hp, &within, &v));
+        sc.pass(&mut within, &mut v, &w);
+        let frame_end = sc.last;
+        assert_eq!(
+            (
+                frame_end.due_budget,
+                frame_end.due_tube,
+                frame_end.due_horizon
+            ),
+            (0, 0, 0)
+        );
+        assert_eq!(frame_end.due_particle, None);
+        // Two triangles sharing an edge have no candidate pairs (every pair shares a
+        // particle): no budget is ever spent, and a vertex moved sideways by twice BROAD_GROW
+        // thicknesses (three quarters of that from the surface's mean) leaves its tube.
+        let quad = ContactSurface::new(&[[0, 1, 2], [0, 2, 3]]);
+        let mut sc1 = SelfContact::new(quad, params);
+        let y0: Vec<Vector> = [(0.0, 0.0), (0.01, 0.0), (0.01, 0.01), (0.0, 0.01)]
+            .map(|(a, b)| Vector::new(a, b, 0.0))
+            .to_vec();
+        let (mut y, mut u, w1) = (y0.clone(), vec![Vector::ZERO; 4], vec![1.0; 4]);
+        sc1.begin_frame(&y0);
+        assert!(sc1.advance(hp, &y, &u));
+        sc1.pass(&mut y, &mut u, &w1);
+        assert_eq!(sc1.last.candidates, 0);
+        let k = 2;
+        y[k].x += (2.0 * BROAD_GROW * thick) as Scalar;
+        assert!(sc1.advance(hp, &y, &u));
+        sc1.pass(&mut y, &mut u, &w1);
+        assert_eq!(
+            (sc1.last.due_tube, sc1.last.due_particle),
+            (1, Some(k as u32))
+        );
+        // Still, but past the search's horizon (AHEAD_PASSES passes as long as the last).
+        assert!(sc1.advance((AHEAD_PASSES as Scalar + 1.0) * hp, &y, &u));
+        sc1.pass(&mut y, &mut u, &w1);
+        assert_eq!((sc1.last.due_horizon, sc1.last.due_particle), (1, None));
+        // Totals and the per-particle counts.
+        let t = sc.total;
+        assert_eq!(
+            (t.passes_run, t.due_budget, t.due_tube, t.due_horizon),
+            (3, 1, 0, 1)
+        );
+        assert_eq!(sc.due_counts()[b], 1);
+        assert_eq!(sc.due_counts().iter().sum::<u32>(), 1);
+        assert_eq!(sc1.due_counts()[k], 1);
     }
 
     #[test]
