@@ -294,7 +294,8 @@ pub struct SelfContactReport {
     pub due_horizon: u32,
     /// The particle that made this pass due (the one furthest past its budget, or the first
     /// out of its tube); none for a pass due by the horizon or at a frame's end. In totals,
-    /// the last pass's. [`SelfContact::due_counts`] counts them per particle.
+    /// the last particle that made a pass due. [`SelfContact::due_counts`] counts them per
+    /// particle.
     pub due_particle: Option<u32>,
     /// Continuous-detection sweeps run (one or more per pass).
     pub passes: u32,
@@ -333,7 +334,7 @@ impl SelfContactReport {
         self.due_budget += o.due_budget;
         self.due_tube += o.due_tube;
         self.due_horizon += o.due_horizon;
-        self.due_particle = o.due_particle;
+        self.due_particle = o.due_particle.or(self.due_particle);
         self.zones += o.zones;
         self.failed |= o.failed;
         self.failures += o.failures;
@@ -782,7 +783,8 @@ impl SelfContact {
             Due::Budget(i) | Due::Tube(i) => Some(i),
             _ => None,
         };
-        (last.due_particle, total.due_particle) = (particle, particle);
+        last.due_particle = particle;
+        total.due_particle = particle.or(total.due_particle);
         // Sized at the first pass (always due by the horizon), so no later step allocates.
         if self.due_counts.len() < x.len() {
             self.due_counts.resize(x.len(), 0);
@@ -2342,6 +2344,8 @@ mod tests {
             (0, 0, 0)
         );
         assert_eq!(frame_end.due_particle, None);
+        // The totals keep the last particle that made a pass due.
+        assert_eq!(sc.total.due_particle, Some(b as u32));
         // Two triangles sharing an edge have no candidate pairs (every pair shares a
         // particle): no budget is ever spent, and a vertex moved sideways by twice BROAD_GROW
         // thicknesses (three quarters of that from the surface's mean) leaves its tube.

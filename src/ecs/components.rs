@@ -193,6 +193,12 @@ pub struct SoftBodyStatus {
     pub rebuilds: u32,
     /// Self-collision passes in the last fixed step (zero without [`SelfCollision`]).
     pub contact_passes: u32,
+    /// The particle that last made a self-collision pass due in the last fixed step, by
+    /// straying past what its nearest pair allows or by leaving the search's tube (none when
+    /// every pass ran at the frame's end or at the search's horizon). The same particle
+    /// step after step is typically a crease that its springs press against the thickness:
+    /// the whole surface's passes then run at its rate.
+    pub contact_due_particle: Option<u32>,
     /// In the last fixed step, self-collision met a configuration its fail-safe could not
     /// separate: the surface's free particles were held where that pass began (free of
     /// intersections), and a warning names the body.

@@ -73,6 +73,10 @@ pub(super) fn step(
                 sim.system.self_contact.as_ref().map(|c| c.total),
             ) {
                 status.contact_passes = a.passes_run - b.passes_run;
+                // The totals keep the last particle that made a pass due: this step's only if
+                // a pass of this step was made due by one.
+                let by_particle = a.due_budget + a.due_tube > b.due_budget + b.due_tube;
+                status.contact_due_particle = if by_particle { a.due_particle } else { None };
                 status.contact_failed = a.failures > b.failures;
                 if status.contact_failed {
                     warn!(
