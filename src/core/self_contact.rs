@@ -754,8 +754,8 @@ impl SelfContact {
         self.since > 0.0 && !self.start.is_empty()
     }
 
-    /// Particles the next pass treats as heavier ([`SUPPORT_MASS`]: resting on a collider): cleared to
-    /// `n` entries for the caller to mark.
+    /// Particles the next pass treats as heavier ([`SUPPORT_MASS`]: resting on a collider):
+    /// cleared to `n` entries for the caller to mark.
     pub fn support_mut(&mut self, n: usize) -> &mut [bool] {
         self.support.clear();
         self.support.resize(n, false);
