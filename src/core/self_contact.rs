@@ -771,27 +771,6 @@ impl SelfContact {
         let start = std::mem::take(&mut self.start);
         self.resolve(self.since, &start, x, v, inv_mass);
         self.start = start;
-        let due = std::mem::take(&mut self.due);
-        let (last, total) = (&mut self.last, &mut self.total);
-        match due {
-            Due::FrameEnd => {}
-            Due::Budget(_) => (last.due_budget, total.due_budget) = (1, total.due_budget + 1),
-            Due::Tube(_) => (last.due_tube, total.due_tube) = (1, total.due_tube + 1),
-            Due::Horizon => (last.due_horizon, total.due_horizon) = (1, total.due_horizon + 1),
-        }
-        let particle = match due {
-            Due::Budget(i) | Due::Tube(i) => Some(i),
-            _ => None,
-        };
-        last.due_particle = particle;
-        total.due_particle = particle.or(total.due_particle);
-        // Sized at the first pass (always due by the horizon), so no later step allocates.
-        if self.due_counts.len() < x.len() {
-            self.due_counts.resize(x.len(), 0);
-        }
-        if let Some(i) = particle {
-            self.due_counts[i as usize] += 1;
-        }
         self.start.copy_from_slice(x);
         self.since = 0.0;
         self.support.clear();
@@ -809,8 +788,18 @@ impl SelfContact {
         inv_mass: &[Scalar],
     ) -> SelfContactReport {
         let h = h as f64;
+        // What made this pass due, as the last `advance` found it (a frame's end when it
+        // found nothing, or when none ran); the totals add it with the rest.
+        let due = std::mem::take(&mut self.due);
         let mut rep = SelfContactReport {
             passes_run: 1,
+            due_budget: matches!(due, Due::Budget(_)) as u32,
+            due_tube: matches!(due, Due::Tube(_)) as u32,
+            due_horizon: (due == Due::Horizon) as u32,
+            due_particle: match due {
+                Due::Budget(i) | Due::Tube(i) => Some(i),
+                Due::FrameEnd | Due::Horizon => None,
+            },
             ..Default::default()
         };
         if h.is_nan() || h <= 0.0 || self.surface.triangles.is_empty() {
@@ -818,6 +807,11 @@ impl SelfContact {
             return rep;
         }
         let n = x.len();
+        // Sized at the first pass (always due by the horizon), so no later one allocates.
+        self.due_counts.resize(n, 0);
+        if let Some(i) = rep.due_particle {
+            self.due_counts[i as usize] += 1;
+        }
         let s = &mut self.s;
         s.p0.resize(n, DVec3::ZERO);
         s.u.resize(n, DVec3::ZERO);
