@@ -965,6 +965,41 @@ mod plugin {
             let status = app.world().get::<SoftBodyStatus>(e).unwrap();
             assert_eq!(status.contact_due_particle, expected);
             named += expected.is_some() as u32;
+            // The frame's passes, searches and candidates are the core's, and reach the
+            // diagnostics store; the phases' times are part of the body's step.
+            assert_eq!(status.contact_passes, after.passes_run - before.passes_run);
+            assert_eq!(status.contact_searches, after.searches - before.searches);
+            assert_eq!(status.contact_candidates, after.candidates);
+            let (broad, narrow) = (status.contact_broad_ms, status.contact_narrow_ms);
+            assert!(
+                broad > 0.0 && narrow > 0.0 && broad + narrow <= status.step_ms,
+                "{status:?}"
+            );
+            let latest = |path: &bevy::diagnostic::DiagnosticPath| -> f64 {
+                let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
+                store.get(path).and_then(|d| d.value()).unwrap()
+            };
+            let status = status.clone();
+            assert_eq!(
+                latest(&SoftBodyDiagnostics::CONTACT_PASSES),
+                status.contact_passes as f64
+            );
+            assert_eq!(
+                latest(&SoftBodyDiagnostics::CONTACT_SEARCHES),
+                status.contact_searches as f64
+            );
+            assert_eq!(
+                latest(&SoftBodyDiagnostics::CONTACT_CANDIDATES),
+                status.contact_candidates as f64
+            );
+            assert_eq!(
+                latest(&SoftBodyDiagnostics::CONTACT_BROAD_TIME),
+                status.contact_broad_ms as f64
+            );
+            assert_eq!(
+                latest(&SoftBodyDiagnostics::CONTACT_NARROW_TIME),
+                status.contact_narrow_ms as f64
+            );
         }
         // Passes made due by particles in most frames (the cloths' fall and landing).
         assert!(named > 48, "{named} of 96 frames");

@@ -191,8 +191,23 @@ pub struct SoftBodyStatus {
     pub tets: u32,
     /// Times the packed model was rebuilt (topology or parameter changes).
     pub rebuilds: u32,
-    /// Self-collision passes in the last fixed step (zero without [`SelfCollision`]).
+    /// Self-collision passes in the last fixed step (zero without [`SelfCollision`]), with
+    /// those of the contact between bodies it took part in.
     pub contact_passes: u32,
+    /// Broad-phase searches of the surface's candidate pairs in the last fixed step, with
+    /// those of the contact between bodies it took part in (a search runs when a vertex has
+    /// left the tube around its motion at the last one, or that search's horizon passed).
+    pub contact_searches: u32,
+    /// Candidate pairs the body's self-collision holds after the last fixed step (what every
+    /// pass looks at).
+    pub contact_candidates: u32,
+    /// Wall time of self-collision's broad phase in the last fixed step (ms): the searches and
+    /// the checks that keep their candidates. Contact between bodies adds its time shared
+    /// evenly among the bodies in it, so the sum over bodies is the wall time.
+    pub contact_broad_ms: f32,
+    /// Wall time of self-collision's narrow phase and responses in the last fixed step (ms),
+    /// shared as [`SoftBodyStatus::contact_broad_ms`] is.
+    pub contact_narrow_ms: f32,
     /// The particle that last made a self-collision pass due in the last fixed step, by
     /// straying past what its nearest pair allows or by leaving the search's tube (none when
     /// every pass ran at the frame's end or at the search's horizon). The same particle

@@ -1,5 +1,6 @@
 //! Soft-body measurements in Bevy's [`DiagnosticsStore`]: step time, substeps, linear-solver
-//! (conjugate-gradient) and Newton iterations, bodies and particles — per fixed frame, summed
+//! (conjugate-gradient) and Newton iterations, bodies and particles, and self-collision's
+//! passes, searches, candidates and broad- and narrow-phase times — per fixed frame, summed
 //! over every body. Read them as any other diagnostic (`LogDiagnosticsPlugin`, the panel).
 
 use super::components::{BodyState, SoftBodyStatus};
@@ -26,15 +27,40 @@ impl SoftBodyDiagnostics {
     pub const BODIES: DiagnosticPath = DiagnosticPath::const_new("soft_body/bodies");
     /// Particles in the simulated bodies.
     pub const PARTICLES: DiagnosticPath = DiagnosticPath::const_new("soft_body/particles");
+    /// Self-collision passes in the last fixed frame, summed over bodies (a pass of the
+    /// contact between bodies counts once for each body in it; see
+    /// [`SoftBodyStatus::contact_passes`]).
+    pub const CONTACT_PASSES: DiagnosticPath =
+        DiagnosticPath::const_new("soft_body/contact_passes");
+    /// Self-collision's broad-phase searches in the last fixed frame, summed over bodies
+    /// (counted as the passes are).
+    pub const CONTACT_SEARCHES: DiagnosticPath =
+        DiagnosticPath::const_new("soft_body/contact_searches");
+    /// Candidate pairs the bodies' self-collision holds after the last fixed frame.
+    pub const CONTACT_CANDIDATES: DiagnosticPath =
+        DiagnosticPath::const_new("soft_body/contact_candidates");
+    /// Wall time of self-collision's broad phase in the last fixed frame, summed over bodies
+    /// (ms).
+    pub const CONTACT_BROAD_TIME: DiagnosticPath =
+        DiagnosticPath::const_new("soft_body/contact_broad_time");
+    /// Wall time of self-collision's narrow phase and responses in the last fixed frame,
+    /// summed over bodies (ms).
+    pub const CONTACT_NARROW_TIME: DiagnosticPath =
+        DiagnosticPath::const_new("soft_body/contact_narrow_time");
 
     /// Every path, in the order above.
-    pub const ALL: [DiagnosticPath; 6] = [
+    pub const ALL: [DiagnosticPath; 11] = [
         Self::STEP_TIME,
         Self::SUBSTEPS,
         Self::LINEAR_ITERATIONS,
         Self::NEWTON_ITERATIONS,
         Self::BODIES,
         Self::PARTICLES,
+        Self::CONTACT_PASSES,
+        Self::CONTACT_SEARCHES,
+        Self::CONTACT_CANDIDATES,
+        Self::CONTACT_BROAD_TIME,
+        Self::CONTACT_NARROW_TIME,
     ];
 }
 
@@ -47,11 +73,12 @@ pub(crate) struct StepTiming {
 pub(crate) fn register(app: &mut App) {
     app.init_resource::<StepTiming>();
     for path in SoftBodyDiagnostics::ALL {
-        let suffix = if path == SoftBodyDiagnostics::STEP_TIME {
-            "ms"
-        } else {
-            ""
-        };
+        let timed = [
+            SoftBodyDiagnostics::STEP_TIME,
+            SoftBodyDiagnostics::CONTACT_BROAD_TIME,
+            SoftBodyDiagnostics::CONTACT_NARROW_TIME,
+        ];
+        let suffix = if timed.contains(&path) { "ms" } else { "" };
         app.register_diagnostic(Diagnostic::new(path).with_suffix(suffix));
     }
 }
@@ -64,6 +91,8 @@ pub(crate) fn measure(
 ) {
     let Some(ms) = timing.ms.take() else { return };
     let (mut n, mut particles, mut substeps, mut linear, mut newton) = (0u32, 0u64, 0, 0, 0);
+    let (mut passes, mut searches, mut candidates) = (0u64, 0u64, 0u64);
+    let (mut broad, mut narrow) = (0.0, 0.0);
     for s in &bodies {
         if matches!(s.state, BodyState::Invalid(_) | BodyState::Pending) {
             continue;
@@ -76,6 +105,11 @@ pub(crate) fn measure(
         substeps += s.substeps as u64;
         linear += s.linear_iterations as u64;
         newton += s.newton_iterations as u64;
+        passes += s.contact_passes as u64;
+        searches += s.contact_searches as u64;
+        candidates += s.contact_candidates as u64;
+        broad += s.contact_broad_ms as f64;
+        narrow += s.contact_narrow_ms as f64;
     }
     diagnostics.add_measurement(&SoftBodyDiagnostics::STEP_TIME, || ms);
     diagnostics.add_measurement(&SoftBodyDiagnostics::SUBSTEPS, || substeps as f64);
@@ -83,4 +117,11 @@ pub(crate) fn measure(
     diagnostics.add_measurement(&SoftBodyDiagnostics::NEWTON_ITERATIONS, || newton as f64);
     diagnostics.add_measurement(&SoftBodyDiagnostics::BODIES, || n as f64);
     diagnostics.add_measurement(&SoftBodyDiagnostics::PARTICLES, || particles as f64);
+    diagnostics.add_measurement(&SoftBodyDiagnostics::CONTACT_PASSES, || passes as f64);
+    diagnostics.add_measurement(&SoftBodyDiagnostics::CONTACT_SEARCHES, || searches as f64);
+    diagnostics.add_measurement(&SoftBodyDiagnostics::CONTACT_CANDIDATES, || {
+        candidates as f64
+    });
+    diagnostics.add_measurement(&SoftBodyDiagnostics::CONTACT_BROAD_TIME, || broad);
+    diagnostics.add_measurement(&SoftBodyDiagnostics::CONTACT_NARROW_TIME, || narrow);
 }

@@ -367,6 +367,19 @@ fn panel(
                     cg.unwrap_or(0.0)
                 ));
             }
+            if status.contact_passes > 0 || status.contact_candidates > 0 {
+                let due = status
+                    .contact_due_particle
+                    .map_or(String::new(), |i| format!(" · due by particle {i}"));
+                ui.label(format!(
+                    "self-collision: {} passes, {} searches, {} candidates · broad {:.2} ms, narrow {:.2} ms{due}",
+                    status.contact_passes,
+                    status.contact_searches,
+                    status.contact_candidates,
+                    status.contact_broad_ms,
+                    status.contact_narrow_ms
+                ));
+            }
             if !status.auto_reason.is_empty() {
                 ui.label(format!("auto: {}", status.auto_reason));
             }

@@ -73,6 +73,10 @@ pub(super) fn step(
                 sim.system.self_contact.as_ref().map(|c| c.total),
             ) {
                 status.contact_passes = a.passes_run - b.passes_run;
+                status.contact_searches = a.searches - b.searches;
+                status.contact_candidates = a.candidates;
+                status.contact_broad_ms = ms(a.broad.saturating_sub(b.broad));
+                status.contact_narrow_ms = ms(a.narrow.saturating_sub(b.narrow));
                 // The totals keep the last particle that made a pass due: this step's only if
                 // a pass of this step was made due by one.
                 let by_particle = a.due_budget + a.due_tube > b.due_budget + b.due_tube;
@@ -306,9 +310,14 @@ pub(super) fn contact_between(
         }
         let rep = cache[slot].resolve(&key, h, &mut members);
         drop(members);
+        // The group's time shared evenly among its bodies (the sum over bodies is the wall time).
+        let share = 1.0 / group.len() as f32;
         for &k in &group {
             let status = &mut all[k].3;
             status.contact_passes += 1;
+            status.contact_searches += rep.searches;
+            status.contact_broad_ms += ms(rep.broad) * share;
+            status.contact_narrow_ms += ms(rep.narrow) * share;
             if rep.failed {
                 status.contact_failed = true;
             }
@@ -635,4 +644,9 @@ fn split_mesh_surface(
         !removed[t - 1]
     });
     ms.torn = true;
+}
+
+/// A duration in milliseconds, as the status reports times.
+fn ms(d: std::time::Duration) -> f32 {
+    d.as_secs_f32() * 1e3
 }
