@@ -979,27 +979,24 @@ mod plugin {
                 let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
                 store.get(path).and_then(|d| d.value()).unwrap()
             };
-            let status = status.clone();
-            assert_eq!(
-                latest(&SoftBodyDiagnostics::CONTACT_PASSES),
-                status.contact_passes as f64
-            );
-            assert_eq!(
-                latest(&SoftBodyDiagnostics::CONTACT_SEARCHES),
-                status.contact_searches as f64
-            );
-            assert_eq!(
-                latest(&SoftBodyDiagnostics::CONTACT_CANDIDATES),
-                status.contact_candidates as f64
-            );
-            assert_eq!(
-                latest(&SoftBodyDiagnostics::CONTACT_BROAD_TIME),
-                status.contact_broad_ms as f64
-            );
-            assert_eq!(
-                latest(&SoftBodyDiagnostics::CONTACT_NARROW_TIME),
-                status.contact_narrow_ms as f64
-            );
+            for (path, value) in [
+                (
+                    SoftBodyDiagnostics::CONTACT_PASSES,
+                    status.contact_passes as f64,
+                ),
+                (
+                    SoftBodyDiagnostics::CONTACT_SEARCHES,
+                    status.contact_searches as f64,
+                ),
+                (
+                    SoftBodyDiagnostics::CONTACT_CANDIDATES,
+                    status.contact_candidates as f64,
+                ),
+                (SoftBodyDiagnostics::CONTACT_BROAD_TIME, broad as f64),
+                (SoftBodyDiagnostics::CONTACT_NARROW_TIME, narrow as f64),
+            ] {
+                assert_eq!(latest(&path), value, "{path}");
+            }
         }
         // Passes made due by particles in most frames (the cloths' fall and landing).
         assert!(named > 48, "{named} of 96 frames");
