@@ -7,6 +7,8 @@
 
 mod common;
 
+use common::latest;
+
 use bevy::asset::{AssetPath, LoadFromPath, UntypedHandle};
 use bevy::ecs::entity::EntityHashMap;
 use bevy::ecs::system::RunSystemOnce;
@@ -59,15 +61,6 @@ fn spawn_both(app: &mut App, cloth_body: SoftBody, tet_body: SoftBody) -> (Entit
 
 fn status(app: &App, e: Entity) -> SoftBodyStatus {
     app.world().get::<SoftBodyStatus>(e).unwrap().clone()
-}
-
-fn latest(app: &App, path: &bevy::diagnostic::DiagnosticPath) -> f64 {
-    app.world()
-        .resource::<bevy::diagnostic::DiagnosticsStore>()
-        .get(path)
-        .unwrap_or_else(|| panic!("{path} registered"))
-        .value()
-        .unwrap_or_else(|| panic!("{path} measured"))
 }
 
 #[test]

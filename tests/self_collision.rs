@@ -903,7 +903,7 @@ mod plugin {
     use super::*;
     use bevy::prelude::*;
     use bevy_soft_body::ecs::BodySim;
-    use common::spawn;
+    use common::{latest, spawn};
 
     /// 1/64 s: exactly representable, so the plugin's frame and the core driver's agree.
     const FRAME: f64 = 1.0 / 64.0;
@@ -975,10 +975,6 @@ mod plugin {
                 broad > 0.0 && narrow > 0.0 && broad + narrow <= status.step_ms,
                 "{status:?}"
             );
-            let latest = |path: &bevy::diagnostic::DiagnosticPath| -> f64 {
-                let store = app.world().resource::<bevy::diagnostic::DiagnosticsStore>();
-                store.get(path).and_then(|d| d.value()).unwrap()
-            };
             for (path, value) in [
                 (
                     SoftBodyDiagnostics::CONTACT_PASSES,
@@ -995,7 +991,7 @@ mod plugin {
                 (SoftBodyDiagnostics::CONTACT_BROAD_TIME, broad as f64),
                 (SoftBodyDiagnostics::CONTACT_NARROW_TIME, narrow as f64),
             ] {
-                assert_eq!(latest(&path), value, "{path}");
+                assert_eq!(latest(&app, &path), value, "{path}");
             }
         }
         // Passes made due by particles in most frames (the cloths' fall and landing).

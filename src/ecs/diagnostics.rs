@@ -72,12 +72,12 @@ pub(crate) struct StepTiming {
 
 pub(crate) fn register(app: &mut App) {
     app.init_resource::<StepTiming>();
+    let timed = [
+        SoftBodyDiagnostics::STEP_TIME,
+        SoftBodyDiagnostics::CONTACT_BROAD_TIME,
+        SoftBodyDiagnostics::CONTACT_NARROW_TIME,
+    ];
     for path in SoftBodyDiagnostics::ALL {
-        let timed = [
-            SoftBodyDiagnostics::STEP_TIME,
-            SoftBodyDiagnostics::CONTACT_BROAD_TIME,
-            SoftBodyDiagnostics::CONTACT_NARROW_TIME,
-        ];
         let suffix = if timed.contains(&path) { "ms" } else { "" };
         app.register_diagnostic(Diagnostic::new(path).with_suffix(suffix));
     }

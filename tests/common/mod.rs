@@ -198,6 +198,16 @@ mod plugin {
         app
     }
 
+    /// The latest value of the diagnostic at `path` in the app's `DiagnosticsStore`.
+    pub fn latest(app: &App, path: &bevy::diagnostic::DiagnosticPath) -> f64 {
+        app.world()
+            .resource::<bevy::diagnostic::DiagnosticsStore>()
+            .get(path)
+            .unwrap_or_else(|| panic!("{path} registered"))
+            .value()
+            .unwrap_or_else(|| panic!("{path} measured"))
+    }
+
     /// Spawns `scene` as one body with `body`'s settings (through `spawn_soft_body`, as a
     /// game would) and returns its root.
     pub fn spawn(

@@ -124,7 +124,7 @@ pub(super) fn step(
                 }
             }
             status.time = sim.time as f32;
-            status.step_ms = start.elapsed().as_secs_f32() * 1e3;
+            status.step_ms = ms(start.elapsed());
         });
     timing.ms = Some(start.elapsed().as_secs_f64() * 1e3);
 }
