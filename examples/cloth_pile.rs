@@ -115,10 +115,10 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
         PRECISION
     );
     println!(
-        "| scene | method | frames | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones | passes due by budget / tube / horizon / frame end | particle making most passes due (passes) |"
+        "| scene | method | frames | self-collision | µs per step | broad µs per step | narrow µs per step | passes per frame | searches per frame | searches around vertices per frame | triangle pairs per search | candidates (end) | near pairs per pass | CCD collisions | zones | passes due by budget / tube / horizon / frame end | particle making most passes due (passes) |"
     );
     println!(
-        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |"
+        "| --- | --- | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- | --- |"
     );
     let se = IntegratorKind::SymplecticEuler;
     let lie = IntegratorKind::LinearlyImplicitEuler;
@@ -159,7 +159,7 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
             let per = |d: Duration| d.as_secs_f64() * 1e6 / steps as f64;
             let pf = |k: u32| k as f64 / frames as f64;
             println!(
-                "| {cloths} × {n}² | {} | {frames} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.0} | {} | {:.0} | {} | {} | {} / {} / {} / {frame_end} | {busiest} |",
+                "| {cloths} × {n}² | {} | {frames} | {} | {:.0} | {:.0} | {:.0} | {:.1} | {:.2} | {:.2} | {:.0} | {} | {:.0} | {} | {} | {} / {} / {} / {frame_end} | {busiest} |",
                 method.label(),
                 if on { "on" } else { "off" },
                 per(wall),
@@ -167,6 +167,7 @@ fn bench(quick: bool, only: Option<usize>, threads: usize) {
                 per(r.narrow),
                 pf(r.passes_run),
                 pf(r.searches),
+                pf(r.searched_around),
                 r.tested as f64 / r.searches.max(1) as f64,
                 r.candidates,
                 r.proximity as f64 / r.passes_run.max(1) as f64,

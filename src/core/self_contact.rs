@@ -50,7 +50,9 @@
 //! broad phase is a bounding-volume hierarchy of swept boxes with normal-cone culling of flat
 //! patches (`tree`); its candidate pairs are kept across passes while every vertex stays near
 //! the motion it had at the search, relative to the surface's mean (a Verlet list along the
-//! motion: see [`AHEAD`]), and the patches it culled stay flat.
+//! motion: see [`AHEAD`]), and the patches it culled stay flat. When a pass outlasts that
+//! horizon (frame-long steps), a few vertices its own impulses take out of their tubes get
+//! new ones, and only their pairs are looked for again ([`SHORT_GROW`], [`AROUND_SHARE`]).
 
 mod distance;
 mod tree;
@@ -272,6 +274,9 @@ pub struct SelfContactReport {
     pub tested: u64,
     /// Times a culled patch stopped being flat between searches and was walked on its own.
     pub resumed: u32,
+    /// Times a few vertices left their tubes and only their pairs were looked for again
+    /// (see [`AROUND_SHARE`]); not counted in [`SelfContactReport::searches`].
+    pub searched_around: u32,
     /// Pairs in the proximity band at the start of the pass (closer than [`PROXIMITY`]
     /// thicknesses: impulses).
     pub proximity: u32,
@@ -326,6 +331,7 @@ impl SelfContactReport {
         self.searches += o.searches;
         self.tested += o.tested;
         self.resumed += o.resumed;
+        self.searched_around += o.searched_around;
         self.proximity += o.proximity;
         self.separated += o.separated;
         self.collisions += o.collisions;
@@ -352,7 +358,8 @@ impl SelfContactReport {
 pub const PASS_TRAVEL: f64 = 0.5;
 
 /// How far (in thicknesses, in each coordinate) each vertex may stray from its expected
-/// motion (see [`AHEAD`]) before the broad phase searches again.
+/// motion (see [`AHEAD`]) before the broad phase searches again ([`SHORT_GROW`] when the
+/// search's horizon is shorter than its pass).
 pub const BROAD_GROW: f64 = 0.5;
 
 /// The search's horizon: after a search each vertex is expected to go on at its velocity
@@ -366,6 +373,28 @@ pub const AHEAD: f64 = 2.0;
 
 /// See [`AHEAD`].
 pub const AHEAD_PASSES: f64 = 8.0;
+
+/// [`BROAD_GROW`] for a search whose horizon is shorter than its own pass (the fastest part
+/// goes more than [`AHEAD`] thicknesses in a pass against the mean: frame-long steps of a
+/// falling or folding cloth). Every later pass then searches at its start whatever the
+/// tubes, so they serve the searching pass alone: their width only takes up what that pass's
+/// own impulses change, and when those take a few vertices out, only those vertices' pairs are
+/// looked for again ([`AROUND_SHARE`]). Narrower tubes make smaller boxes and fewer
+/// candidates: on the 64² cloth folding on the sphere with linearly implicit Euler at 1/60 s,
+/// 80,000 candidates instead of 125,000 and self-collision's phases 12.7 ms a step instead of
+/// 16.5 (see the benchmarks). With short steps the tubes outlast many passes, and narrower
+/// ones would make a search of nearly every pass.
+pub const SHORT_GROW: f64 = 0.25;
+
+/// When a search's horizon is shorter than its pass (see [`SHORT_GROW`]) and no more than one
+/// surface vertex in this many has left its tube in the middle of the pass, only those vertices
+/// get new tubes and only their pairs are looked for again (the tree queried with their
+/// points', triangles' and edges' boxes), rather than walking the whole tree again. The
+/// query costs about 35 µs a vertex on the 64² folding cloth, a walk 9 ms, so past a few
+/// hundred vertices the walk is cheaper. With a horizon of several passes a walk also
+/// restarts it, which a query does not, so there every vertex out starts a walk (queries
+/// there cost more than they saved: see the benchmarks).
+pub const AROUND_SHARE: usize = 32;
 
 /// Pairs closer than this many thicknesses at a pass's start stop approaching (with
 /// friction). Wider than the thickness the end of a pass restores: a pair held at the
@@ -519,8 +548,18 @@ struct Scratch {
     clock: f64,
     tube_s: Vec<(Vector, Vector)>,
     tube_ref_s: Vector,
+    /// How far each vertex may stray from its tube in each coordinate (m; [`BROAD_GROW`] or
+    /// [`SHORT_GROW`] thicknesses, as the last search chose), and in `Scalar`.
+    grow: f64,
+    grow_s: Scalar,
     searches: u32,
     tested: u64,
+    /// Vertices out of their tubes (marked in `out_mark`), the pairs a search around them
+    /// found, and the count of such searches.
+    out: Vec<u32>,
+    out_mark: Vec<bool>,
+    found: Vec<Pair>,
+    searched_around: u32,
 }
 
 impl Scratch {
@@ -730,7 +769,7 @@ impl SelfContact {
         // that round-off keeps inside a little longer only makes the pass later, and the pass
         // checks exactly.
         let (d, tau) = (mean_x - s.tube_ref_s, tau as Scalar);
-        let g = Vector::splat((BROAD_GROW * self.params.thickness) as Scalar);
+        let g = Vector::splat(s.grow_s);
         let out = verts.iter().find(|&&i| {
             let (base, w) = s.tube_s[i as usize];
             !(x[i as usize] - d - (base + w * tau)).abs().cmple(g).all()
@@ -854,6 +893,7 @@ impl SelfContact {
         // 1–2: proximity at the start (impulses) and at the end (position pushes).
         let t0 = Instant::now();
         let (searches, tested, resumed) = (s.searches, s.tested, s.resumed);
+        let around = s.searched_around;
         let rebuilt = ctx.ensure_broad(s);
         let t1 = Instant::now();
         rep.broad += t1 - t0;
@@ -1000,6 +1040,7 @@ impl SelfContact {
         rep.searches = s.searches - searches;
         rep.tested = s.tested - tested;
         rep.resumed = s.resumed - resumed;
+        rep.searched_around = s.searched_around - around;
         self.last = rep;
         self.total.add(&rep);
         self.total.candidates = rep.candidates;
@@ -1105,6 +1146,20 @@ fn spread(pair: Pair, v: [DVec3; 4]) -> f64 {
     .sqrt()
 }
 
+/// The pair a walk found, by its four particles.
+fn pair_of(found: Found, triangles: &[[u32; 3]], edges: &[[u32; 2]]) -> Pair {
+    match found {
+        Found::PointTriangle(p, t) => {
+            let t = triangles[t as usize];
+            Pair::PointTriangle([p, t[0], t[1], t[2]])
+        }
+        Found::EdgeEdge(e, f) => {
+            let (e, f) = (edges[e as usize], edges[f as usize]);
+            Pair::EdgeEdge([e[0], e[1], f[0], f[1]])
+        }
+    }
+}
+
 /// The mean of `x` over the particles `verts` (zero for none).
 fn mean_of(verts: &[u32], x: &[Vector]) -> Vector {
     let mut sum = Vector::ZERO;
@@ -1168,7 +1223,7 @@ impl Ctx<'_> {
             sum1 += p1;
         }
         let (mean0, mean1) = (sum0 / nv, sum1 / nv);
-        let grow = BROAD_GROW * self.thick;
+        let grow = s.grow;
         if s.broad_valid && s.tube.len() == s.p0.len() && s.clock <= s.tube_len {
             // Each vertex must still be within `grow` (in each coordinate) of where its motion
             // at the search takes it, relative to the surface's mean position (a common
@@ -1177,15 +1232,22 @@ impl Ctx<'_> {
             let (t0, t1) = (s.clock - h, s.clock);
             let (d0, d1) = (mean0 - s.tube_ref, mean1 - s.tube_ref);
             let g = DVec3::splat(grow);
-            let inside = verts.iter().all(|&i| {
-                let i = i as usize;
+            let out_of = |i: usize| {
                 let (base, w) = s.tube[i];
                 let e0 = s.p0[i] - d0 - (base + w * t0);
                 let e1 = s.p1[i] - d1 - (base + w * t1);
-                e0.abs().max(e1.abs()).cmple(g).all()
-            });
+                !e0.abs().max(e1.abs()).cmple(g).all()
+            };
+            let inside = !verts.iter().any(|&i| out_of(i as usize));
+            // A few vertices out: new tubes for them, their pairs found again (below).
+            let around = !inside && s.tube_len < h && {
+                s.out.clear();
+                s.out
+                    .extend(verts.iter().copied().filter(|&i| out_of(i as usize)));
+                s.out.len() * AROUND_SHARE <= verts.len()
+            };
             // The culled patches must still be flat along the paths as they are now.
-            if inside && s.cones_at != s.edits {
+            if (inside || around) && s.cones_at != s.edits {
                 let moved = (!s.moved_all).then_some(&s.moved[..]);
                 if s.moved_all {
                     s.tree.load(verts, &s.p0, &s.p1);
@@ -1204,12 +1266,16 @@ impl Ctx<'_> {
                 s.cones_at = s.edits;
                 s.clear_moved();
             }
-            if inside && s.cones_at == s.edits {
+            if around {
+                self.search_around(s, [d0, d1], t1, (mean1 - mean0) / h, grow);
+            }
+            if inside || around {
                 s.broad_at = s.edits;
                 return false;
             }
         }
-        self.broad_phase(s, grow, mean1);
+        self.broad_phase(s, mean1);
+        let grow = s.grow;
         s.epoch.set += 1;
         s.clock = 0.0;
         s.tube_s.clear();
@@ -1217,26 +1283,15 @@ impl Ctx<'_> {
             .extend(s.tube.iter().map(|&(b, w)| (from_d(b), from_d(w))));
         s.tube_ref_s = from_d(mean1);
         self.start_distances(s, 0);
-        // Keep only pairs that can come within the thickness before the next search. At the
-        // pass's end a pair is at least its distance now less the pass's approach; after, each
-        // vertex is within `grow` of its motion at the search in each coordinate (√3 `grow`),
-        // and those motions bring the pair's parts closer by at most the largest difference
-        // of their vertices' velocities (relative to the mean) times the search's horizon.
-        // That difference, times the pass's length, is also [`reach`]'s second bound on the
-        // pass's approach (the velocities relative to the mean differ as the velocities do).
-        let slack = 2.0 * 3f64.sqrt() * grow;
-        // Marked on the team (a pair to drop gets a NaN distance: a NaN distance would fail
-        // the test as well), then dropped in order.
-        let (tube, tube_len, thick) = (&s.tube, s.tube_len, self.thick);
-        let (step2, h) = (&s.step2, self.h);
+        // Keep only pairs that can come within the thickness before the next search: marked
+        // on the team (a pair to drop gets a NaN distance: a NaN distance would fail the test
+        // as well), then dropped in order.
+        let near = self.may_come_near(&s.tube, s.tube_len, &s.step2, grow);
         let out = SharedMut(s.pairs.as_mut_ptr());
         for_each_range(s.pairs.len(), PAIR_CHUNK, |r| {
             // SAFETY: each range is its own chunk's.
             for (pair, d0) in unsafe { out.slice(r) } {
-                let spread = spread(*pair, pair.ids().map(|i| tube[i as usize].1));
-                let approach = own_reach(step2, *pair).min(spread * h);
-                let keep = *d0 - approach - spread * tube_len - slack < PROXIMITY * thick;
-                if !keep {
+                if !near(*pair, *d0) {
                     *d0 = f64::NAN;
                 }
             }
@@ -1250,10 +1305,107 @@ impl Ctx<'_> {
         true
     }
 
+    /// Whether a candidate pair at distance `d0` at the pass's start may come within the
+    /// proximity band before the next search: only those are kept. At the pass's end a pair
+    /// is at least its distance now less the pass's approach; after, each vertex is within
+    /// `grow` of its tube in each coordinate (√3 `grow`), and the tubes bring the pair's parts
+    /// closer by at most the largest difference of their vertices' velocities (relative to
+    /// the mean) times the search's horizon. That difference, times the pass's length, is
+    /// also [`reach`]'s second bound on the pass's approach (the velocities relative to the
+    /// mean differ as the velocities do).
+    fn may_come_near<'a>(
+        &self,
+        tube: &'a [(DVec3, DVec3)],
+        tube_len: f64,
+        step2: &'a [f64],
+        grow: f64,
+    ) -> impl Fn(Pair, f64) -> bool + Sync + 'a {
+        let slack = 2.0 * 3f64.sqrt() * grow;
+        let (h, band) = (self.h, PROXIMITY * self.thick);
+        move |pair, d0| {
+            let spread = spread(pair, pair.ids().map(|i| tube[i as usize].1));
+            let approach = own_reach(step2, pair).min(spread * h);
+            d0 - approach - spread * tube_len - slack < band
+        }
+    }
+
+    /// The vertices `s.out`, out of their tubes at the pass's times `t1 - h` and `t1` (the
+    /// surface's mean then `d` from the tubes' reference), get new tubes along their
+    /// velocities now relative to the mean (`mean_u`) up to the search's horizon, and boxes
+    /// that hold their paths over this pass (as the others' boxes hold theirs: from the
+    /// start or from the start less `d[0]`, to the end less `d[1]`) and their tubes; the
+    /// candidates with one of their particles are dropped, and the tree queried for their
+    /// points', triangles' and edges' pairs, which replace them. The other vertices are in
+    /// their tubes and their boxes hold them, so the candidates are what a walk would find,
+    /// and more (pairs whose tubes the search would have told apart are kept if their boxes
+    /// overlap). The sweeps see the new pairs through their particles' change marks.
+    fn search_around(&self, s: &mut Scratch, d: [DVec3; 2], t1: f64, mean_u: DVec3, grow: f64) {
+        let margin = 0.5 * PROXIMITY * self.thick + grow;
+        let out = std::mem::take(&mut s.out);
+        s.out_mark.resize(s.p0.len(), false);
+        for &i in &out {
+            let i = i as usize;
+            let w = s.u[i] - mean_u;
+            let end = s.p1[i] - d[1];
+            let base = end - w * t1;
+            s.tube[i] = (base, w);
+            s.tube_s[i] = (from_d(base), from_d(w));
+            let ahead = end + w * (s.tube_len - t1);
+            let path = [s.p0[i], s.p1[i], s.p0[i] - d[0], end, ahead];
+            s.tree.set_vertex_box(i as u32, &path, margin);
+            s.out_mark[i] = true;
+        }
+        let (tris, edges) = (&self.surf.triangles, &self.surf.edges);
+        s.tree.refit_boxes(tris, edges);
+        let mark = &s.out_mark;
+        s.pairs
+            .retain(|(p, _)| !p.ids().iter().any(|&k| mark[k as usize]));
+        let from = s.pairs.len();
+        let found = &mut s.found;
+        found.clear();
+        s.tree.search_around(tris, edges, &out, |f| {
+            // Edge pairs in one order, so a pair found from both its edges is one.
+            let f = match f {
+                Found::EdgeEdge(e, g) => Found::EdgeEdge(e.min(g), e.max(g)),
+                f => f,
+            };
+            found.push(pair_of(f, tris, edges));
+        });
+        found.sort_unstable_by_key(|p| match *p {
+            Pair::PointTriangle(ids) => (0, ids),
+            Pair::EdgeEdge(ids) => (1, ids),
+        });
+        found.dedup();
+        s.pairs.extend(found.iter().map(|&p| (p, 0.0)));
+        self.start_distances(s, from);
+        let kept = {
+            let near = self.may_come_near(&s.tube, s.tube_len, &s.step2, grow);
+            let mut kept = from;
+            for k in from..s.pairs.len() {
+                let (pair, d0) = s.pairs[k];
+                if near(pair, d0) {
+                    s.pairs[kept] = (pair, d0);
+                    kept += 1;
+                }
+            }
+            kept
+        };
+        s.pairs.truncate(kept);
+        for k in from..kept {
+            let ids = s.pairs[k].0.ids();
+            s.mark(&ids);
+        }
+        for &i in &out {
+            s.out_mark[i as usize] = false;
+        }
+        s.out = out;
+        s.searched_around += 1;
+    }
+
     /// Candidate pairs: swept boxes (start to end, grown by the thickness and `grow`) that
     /// overlap; adjacent pairs (sharing a particle) excluded, and pairs within flat connected
     /// patches culled (see `tree`).
-    fn broad_phase(&self, s: &mut Scratch, grow: f64, mean1: DVec3) {
+    fn broad_phase(&self, s: &mut Scratch, mean1: DVec3) {
         // Each vertex's path, and its motion on from the path's end at its velocity relative
         // to the surface's mean (a part that swings or slides keeps to it for several
         // passes) over the search's horizon ([`AHEAD`]), all grown by `grow` (how far it may
@@ -1269,6 +1421,12 @@ impl Ctx<'_> {
             .fold(0.0, f64::max)
             .sqrt();
         s.tube_len = (AHEAD_PASSES * self.h).min(AHEAD * self.thick / fastest);
+        let grow = if s.tube_len < self.h {
+            SHORT_GROW
+        } else {
+            BROAD_GROW
+        } * self.thick;
+        (s.grow, s.grow_s) = (grow, grow as Scalar);
         s.tube_ref = mean1;
         s.tube.resize(s.p0.len(), (DVec3::ZERO, DVec3::ZERO));
         s.p2.resize(s.p0.len(), DVec3::ZERO);
@@ -1297,19 +1455,7 @@ impl Ctx<'_> {
         let (triangles, edges) = (&self.surf.triangles, &self.surf.edges);
         let pairs = &mut s.pairs;
         s.tree.search(triangles, edges, resume, |found| {
-            pairs.push((
-                match found {
-                    Found::PointTriangle(p, t) => {
-                        let t = triangles[t as usize];
-                        Pair::PointTriangle([p, t[0], t[1], t[2]])
-                    }
-                    Found::EdgeEdge(e, f) => {
-                        let (e, f) = (edges[e as usize], edges[f as usize]);
-                        Pair::EdgeEdge([e[0], e[1], f[0], f[1]])
-                    }
-                },
-                0.0,
-            ))
+            pairs.push((pair_of(found, triangles, edges), 0.0))
         });
         // Headroom of half what a walk found: the count wanders as a resting body settles,
         // and a pass should not allocate each time it passes the last largest.

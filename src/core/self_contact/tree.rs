@@ -438,6 +438,21 @@ pub(super) struct SurfaceTree {
     culled: Vec<u32>,
     /// Culled nodes found no longer flat, not yet walked.
     failed: Vec<u32>,
+    /// Per triangle: the culled node it lies in (`NONE`: none).
+    culled_of: Vec<u32>,
+    /// Per vertex and per edge: the triangle that owns it (`NONE`: none).
+    vertex_owner: Vec<u32>,
+    edge_owner: Vec<u32>,
+    /// Where the last refit's boxes are measured from, and the largest component of the
+    /// positions they hold.
+    box_origin: DVec3,
+    box_qmax: f32,
+    /// Scratch of [`SurfaceTree::search_around`]: the features it has queried.
+    seen_tri: Vec<bool>,
+    seen_edge: Vec<bool>,
+    around_stack: Vec<u32>,
+    around_tris: Vec<u32>,
+    around_edges: Vec<u32>,
     stack: Vec<(u32, u32, bool)>,
     /// Triangle pairs the last search compared.
     pub triangle_pairs: u64,
@@ -499,7 +514,11 @@ impl SurfaceTree {
         let mut edge_taken = vec![false; edges.len()];
         self.owned_vertices.clear();
         self.owned_edges.clear();
-        for (t, te) in triangles.iter().zip(&tri_edges) {
+        self.vertex_owner.clear();
+        self.vertex_owner.resize(nv, NONE);
+        self.edge_owner.clear();
+        self.edge_owner.resize(edges.len(), NONE);
+        for (ti, (t, te)) in triangles.iter().zip(&tri_edges).enumerate() {
             let mut ov = [NONE; 3];
             let mut oe = [NONE; 3];
             for k in 0..3 {
@@ -507,11 +526,13 @@ impl SurfaceTree {
                 if v < nv && !vertex_taken[v] {
                     vertex_taken[v] = true;
                     ov[k] = t[k];
+                    self.vertex_owner[v] = ti as u32;
                 }
                 let e = te[k];
                 if e != NONE && !edge_taken[e as usize] {
                     edge_taken[e as usize] = true;
                     oe[k] = e;
+                    self.edge_owner[e as usize] = ti as u32;
                 }
             }
             self.owned_vertices.push(ov);
@@ -754,6 +775,12 @@ impl SurfaceTree {
 
         self.tbox.resize(nt, (Vec3A::ZERO, Vec3A::ZERO));
         self.tbits.resize(nt, 0);
+        self.culled_of.clear();
+        self.culled_of.resize(nt, NONE);
+        self.seen_tri.clear();
+        self.seen_tri.resize(nt, false);
+        self.seen_edge.clear();
+        self.seen_edge.resize(edges.len(), false);
         self.vbox.resize(x.len(), (Vec3A::ZERO, Vec3A::ZERO));
         self.ebox.resize(edges.len(), (Vec3A::ZERO, Vec3A::ZERO));
         self.nbox
@@ -823,6 +850,7 @@ impl SurfaceTree {
         // The margin plus the rounding of the positions to `f32` (half an ulp of the largest,
         // twice over) and of the margin itself.
         let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + self.qmax * f32::EPSILON);
+        (self.box_origin, self.box_qmax) = (self.origin, self.qmax);
         let (q0, q1, qmax) = (&self.q0, &self.q1, self.qmax);
         self.vbox.resize(q0.len(), (Vec3A::ZERO, Vec3A::ZERO));
         for ((b, &s), &e) in self.vbox.iter_mut().zip(q0).zip(q1) {
@@ -919,6 +947,12 @@ impl SurfaceTree {
         }
         let failed = &self.failed;
         self.culled.retain(|c| !failed.contains(c));
+        for &n in failed {
+            let node = self.nodes[n as usize];
+            for &t in &self.order[node.start as usize..node.end as usize] {
+                self.culled_of[t as usize] = NONE;
+            }
+        }
         false
     }
 
@@ -1010,6 +1044,7 @@ impl SurfaceTree {
         } else {
             self.culled.clear();
             self.failed.clear();
+            self.culled_of.fill(NONE);
             stack.push((0, 0, false));
         }
         let mut tests = 0u64;
@@ -1018,6 +1053,9 @@ impl SurfaceTree {
             if a == b {
                 if !keep && na.connected && self.nbits[a as usize] != 0 {
                     self.culled.push(a);
+                    for &t in &self.order[na.start as usize..na.end as usize] {
+                        self.culled_of[t as usize] = a;
+                    }
                     continue;
                 }
                 if na.child == 0 {
@@ -1071,6 +1109,163 @@ impl SurfaceTree {
         self.triangle_pairs = tests;
     }
 
+    /// Gives vertex `v` the box of the points `pts` grown by `margin`, in place of the one the
+    /// last [`SurfaceTree::refit`] gave it (measured from the same origin, rounded outwards
+    /// as it rounds); [`SurfaceTree::refit_boxes`] then takes it up.
+    pub fn set_vertex_box(&mut self, v: u32, pts: &[DVec3], margin: f64) {
+        let q = pts.iter().map(|&p| (p - self.box_origin).as_vec3a());
+        let (lo, hi) = q.fold((Vec3A::MAX, Vec3A::MIN), |(lo, hi), q| {
+            (lo.min(q), hi.max(q))
+        });
+        let qmax = lo.abs().max(hi.abs()).max_element().max(self.box_qmax);
+        let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + qmax * f32::EPSILON);
+        self.vbox[v as usize] = (lo - m, hi + m);
+    }
+
+    /// The triangles', edges' and nodes' boxes again from the vertices' (after
+    /// [`SurfaceTree::set_vertex_box`]).
+    pub fn refit_boxes(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]]) {
+        let vb = &self.vbox;
+        for (b, tri) in self.tbox.iter_mut().zip(triangles) {
+            let [a, b2, c] = tri.map(|i| vb[i as usize]);
+            *b = union32(union32(a, b2), c);
+        }
+        for (b, e) in self.ebox.iter_mut().zip(edges) {
+            *b = union32(vb[e[0] as usize], vb[e[1] as usize]);
+        }
+        self.refit_nodes(true);
+    }
+
+    /// Calls `found` for every point–triangle and edge–edge pair with a feature at one of the
+    /// vertices `around` (the vertex, a triangle or an edge it is a corner of) whose boxes
+    /// overlap, neither sharing a particle, except the pairs inside a node the last search
+    /// culled (a resumed walk finds those if it stops being flat): with the pairs the walks
+    /// found of the features at no vertex of `around`, every pair [`SurfaceTree::search`]
+    /// would find. A pair with features at two of them may be reported twice.
+    pub fn search_around(
+        &mut self,
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
+        around: &[u32],
+        mut found: impl FnMut(Found),
+    ) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let mut stack = std::mem::take(&mut self.around_stack);
+        let culled_of = &self.culled_of;
+        let apart = |t: u32, u: u32| {
+            let c = culled_of[t as usize];
+            c == NONE || c != culled_of[u as usize]
+        };
+        let edge_at = |a: u32, b: u32| {
+            edges
+                .binary_search(&[a.min(b), a.max(b)])
+                .map_or(NONE, |k| k as u32)
+        };
+        let mut tris = std::mem::take(&mut self.around_tris);
+        let mut edge_list = std::mem::take(&mut self.around_edges);
+        tris.clear();
+        edge_list.clear();
+        for &v in around {
+            let v = v as usize;
+            // The point against every triangle.
+            let (vb, owner) = (self.vbox[v], self.vertex_owner[v]);
+            if owner != NONE {
+                self.overlapping(&vb, &mut stack, |t| {
+                    if !triangles[t as usize].contains(&(v as u32)) && apart(owner, t) {
+                        found(Found::PointTriangle(v as u32, t));
+                    }
+                });
+            }
+            if v + 1 < self.vertex_start.len() {
+                let (lo, hi) = (self.vertex_start[v], self.vertex_start[v + 1]);
+                for &t in &self.vertex_tris[lo as usize..hi as usize] {
+                    if !self.seen_tri[t as usize] {
+                        tris.push(t);
+                    }
+                    for &u in &triangles[t as usize] {
+                        let e = edge_at(v as u32, u);
+                        if u as usize != v && e != NONE && !self.seen_edge[e as usize] {
+                            self.seen_edge[e as usize] = true;
+                            edge_list.push(e);
+                        }
+                    }
+                    self.seen_tri[t as usize] = true;
+                }
+            }
+        }
+        // Each triangle against every point.
+        for &t in &tris {
+            let tb = self.tbox[t as usize];
+            let tt = triangles[t as usize];
+            self.overlapping(&tb, &mut stack, |u| {
+                for &p in &self.owned_vertices[u as usize] {
+                    if p != NONE
+                        && !tt.contains(&p)
+                        && overlap32(&self.vbox[p as usize], &tb)
+                        && apart(u, t)
+                    {
+                        found(Found::PointTriangle(p, t));
+                    }
+                }
+            });
+            self.seen_tri[t as usize] = false;
+        }
+        // Each edge against every edge.
+        for &e in &edge_list {
+            let (eb, ea, owner) = (
+                self.ebox[e as usize],
+                edges[e as usize],
+                self.edge_owner[e as usize],
+            );
+            self.overlapping(&eb, &mut stack, |u| {
+                for &f in &self.owned_edges[u as usize] {
+                    if self.edge_near(edges, ea, &eb, f) && apart(owner, u) {
+                        found(Found::EdgeEdge(e, f));
+                    }
+                }
+            });
+            self.seen_edge[e as usize] = false;
+        }
+        self.around_stack = stack;
+        self.around_tris = tris;
+        self.around_edges = edge_list;
+    }
+
+    /// Whether edge `f` (`NONE`: none) shares no particle with the edge `ea` and its box
+    /// overlaps `eb`.
+    #[inline(always)]
+    fn edge_near(&self, edges: &[[u32; 2]], ea: [u32; 2], eb: &Box32, f: u32) -> bool {
+        if f == NONE {
+            return false;
+        }
+        let fa = edges[f as usize];
+        !fa.contains(&ea[0]) && !fa.contains(&ea[1]) && overlap32(eb, &self.ebox[f as usize])
+    }
+
+    /// Calls `leaf(t)` for every triangle whose box overlaps `bx` (the last refit's).
+    fn overlapping(&self, bx: &Box32, stack: &mut Vec<u32>, mut leaf: impl FnMut(u32)) {
+        stack.clear();
+        stack.push(0);
+        while let Some(n) = stack.pop() {
+            if !overlap32(&self.nbox[n as usize], bx) {
+                continue;
+            }
+            let node = self.nodes[n as usize];
+            if node.child == 0 {
+                for &t in &self.order[node.start as usize..node.end as usize] {
+                    if overlap32(&self.tbox[t as usize], bx) {
+                        leaf(t);
+                    }
+                }
+            } else {
+                stack.push(node.child + 1);
+                stack.push(node.child);
+            }
+        }
+    }
+
     /// The vertex–triangle and edge–edge pairs of triangles `t` and `u` whose boxes overlap,
     /// each vertex and edge taken by the one triangle that owns it, pairs that share a
     /// particle left out.
@@ -1101,14 +1296,7 @@ impl SurfaceTree {
             }
             let (ea, eb) = (edges[e as usize], &self.ebox[e as usize]);
             for &f in &self.owned_edges[u as usize] {
-                if f == NONE {
-                    continue;
-                }
-                let fa = edges[f as usize];
-                if !fa.contains(&ea[0])
-                    && !fa.contains(&ea[1])
-                    && overlap32(eb, &self.ebox[f as usize])
-                {
+                if self.edge_near(edges, ea, eb, f) {
                     found(Found::EdgeEdge(e, f));
                 }
             }
@@ -1517,6 +1705,82 @@ mod tests {
         let cycle = ContactSurface::torn(&[[0, 1, 2]], &[1, 0, 2]);
         assert_eq!(cycle.origin, vec![1, 0, 2]);
         assert!(ContactSurface::new(&tris).on_cut().is_empty());
+    }
+
+    #[test]
+    fn a_search_around_some_vertices_finds_what_a_walk_finds_there() {
+        // The sheet folded over itself 6 mm apart: flat parts culled, the fold's layers near.
+        let (h, m) = (0.02, 0.004);
+        let (tris, x) = folded_grid(24, h, 0.25, 0.006);
+        let surf = ContactSurface::new(&tris);
+        let edges = &surf.edges;
+        let mut tree = SurfaceTree::default();
+        tree.build(&surf, &x);
+        tree.load(&surf.vertices, &x, &x);
+        tree.refit(&tris, edges, m);
+        let walk = |tree: &mut SurfaceTree| {
+            let mut set = BTreeSet::new();
+            tree.search(&tris, edges, false, |f| {
+                set.insert(match f {
+                    Found::PointTriangle(p, t) => (0, p, t),
+                    Found::EdgeEdge(e, f) => (1, e.min(f), e.max(f)),
+                });
+            });
+            set
+        };
+        let before = walk(&mut tree);
+        // Every fifth vertex, and a strip of them across the flat lower layer (inside culled
+        // nodes), moved: some to 8 mm up (through the upper layer), some along a path
+        // sideways.
+        let around: Vec<u32> = (0..x.len() as u32)
+            .filter(|&v| v % 5 == 0 || (v / 24 == 12 && v % 24 < 8))
+            .collect();
+        assert!(
+            around
+                .iter()
+                .any(|&v| tree.culled_of[tree.vertex_owner[v as usize] as usize] != NONE),
+            "a moved vertex lies in a culled node"
+        );
+        for &v in &around {
+            let p = x[v as usize];
+            if v % 2 == 0 {
+                // Gone from where it was.
+                tree.set_vertex_box(v, &[p + DVec3::new(0.0, 0.008, 0.0)], m);
+            } else {
+                tree.set_vertex_box(v, &[p, p + DVec3::new(0.01, 0.0, 0.0)], m);
+            }
+        }
+        tree.refit_boxes(&tris, edges);
+        let after = walk(&mut tree);
+        let mut found = Vec::new();
+        tree.search_around(&tris, edges, &around, |f| {
+            found.push(match f {
+                Found::PointTriangle(p, t) => (0, p, t),
+                Found::EdgeEdge(e, f) => (1, e.min(f), e.max(f)),
+            })
+        });
+        let near: BTreeSet<_> = found.iter().copied().collect();
+        // A pair with a feature at a moved vertex.
+        let at = |&(kind, a, b): &(u8, u32, u32)| {
+            let ids: Vec<u32> = if kind == 0 {
+                std::iter::once(a).chain(tris[b as usize]).collect()
+            } else {
+                edges[a as usize]
+                    .into_iter()
+                    .chain(edges[b as usize])
+                    .collect()
+            };
+            ids.iter().any(|i| around.contains(i))
+        };
+        let after_at: BTreeSet<_> = after.iter().copied().filter(at).collect();
+        assert_eq!(near, after_at, "the pairs around the moved vertices");
+        // With the pairs found before away from them: what the walk finds now.
+        let kept: BTreeSet<_> = before.iter().copied().filter(|p| !at(p)).collect();
+        assert_eq!(kept.union(&near).copied().collect::<BTreeSet<_>>(), after);
+        // The moves made pairs and ended some.
+        let before_at: BTreeSet<_> = before.iter().copied().filter(at).collect();
+        assert!(near.difference(&before_at).count() > 50, "new pairs");
+        assert!(before_at.difference(&near).count() > 10, "pairs ended");
     }
 
     #[test]
