@@ -1267,7 +1267,7 @@ impl Ctx<'_> {
                 s.clear_moved();
             }
             if around {
-                self.search_around(s, [d0, d1], t1, (mean1 - mean0) / h, grow);
+                self.search_around(s, [d0, d1], t1, (mean1 - mean0) / h);
             }
             if inside || around {
                 s.broad_at = s.edits;
@@ -1275,7 +1275,6 @@ impl Ctx<'_> {
             }
         }
         self.broad_phase(s, mean1);
-        let grow = s.grow;
         s.epoch.set += 1;
         s.clock = 0.0;
         s.tube_s.clear();
@@ -1283,15 +1282,36 @@ impl Ctx<'_> {
             .extend(s.tube.iter().map(|&(b, w)| (from_d(b), from_d(w))));
         s.tube_ref_s = from_d(mean1);
         self.start_distances(s, 0);
-        // Keep only pairs that can come within the thickness before the next search: marked
-        // on the team (a pair to drop gets a NaN distance: a NaN distance would fail the test
-        // as well), then dropped in order.
-        let near = self.may_come_near(&s.tube, s.tube_len, &s.step2, grow);
-        let out = SharedMut(s.pairs.as_mut_ptr());
-        for_each_range(s.pairs.len(), PAIR_CHUNK, |r| {
+        // Keep only pairs that can come within the thickness before the next search.
+        self.keep_near(s, 0);
+        s.broad_valid = true;
+        s.broad_at = s.edits;
+        s.searches += 1;
+        true
+    }
+
+    /// Drops the candidates from index `from` on that cannot come within the proximity band
+    /// before the next search. At the pass's end a pair is at least its distance now less the
+    /// pass's approach; after, each vertex is within the tubes' width (`grow`) of its tube in
+    /// each coordinate (√3 `grow`), and the tubes bring the pair's parts closer by at most the
+    /// largest difference of their vertices' velocities (relative to the mean) times the
+    /// search's horizon. That difference, times the pass's length, is also [`reach`]'s second
+    /// bound on the pass's approach (the velocities relative to the mean differ as the
+    /// velocities do). Marked on the team (a pair to drop gets a NaN distance: a NaN distance
+    /// would fail the test as well), then dropped in order.
+    fn keep_near(&self, s: &mut Scratch, from: usize) {
+        let slack = 2.0 * 3f64.sqrt() * s.grow;
+        let (tube, tube_len, step2) = (&s.tube, s.tube_len, &s.step2);
+        let (h, band) = (self.h, PROXIMITY * self.thick);
+        let pairs = &mut s.pairs[from..];
+        let out = SharedMut(pairs.as_mut_ptr());
+        for_each_range(pairs.len(), PAIR_CHUNK, |r| {
             // SAFETY: each range is its own chunk's.
             for (pair, d0) in unsafe { out.slice(r) } {
-                if !near(*pair, *d0) {
+                let spread = spread(*pair, pair.ids().map(|i| tube[i as usize].1));
+                let approach = own_reach(step2, *pair).min(spread * h);
+                let keep = *d0 - approach - spread * tube_len - slack < band;
+                if !keep {
                     *d0 = f64::NAN;
                 }
             }
@@ -1299,34 +1319,6 @@ impl Ctx<'_> {
         let mut pairs = std::mem::take(&mut s.pairs);
         pairs.retain(|&(_, d0)| !d0.is_nan());
         s.pairs = pairs;
-        s.broad_valid = true;
-        s.broad_at = s.edits;
-        s.searches += 1;
-        true
-    }
-
-    /// Whether a candidate pair at distance `d0` at the pass's start may come within the
-    /// proximity band before the next search: only those are kept. At the pass's end a pair
-    /// is at least its distance now less the pass's approach; after, each vertex is within
-    /// `grow` of its tube in each coordinate (√3 `grow`), and the tubes bring the pair's parts
-    /// closer by at most the largest difference of their vertices' velocities (relative to
-    /// the mean) times the search's horizon. That difference, times the pass's length, is
-    /// also [`reach`]'s second bound on the pass's approach (the velocities relative to the
-    /// mean differ as the velocities do).
-    fn may_come_near<'a>(
-        &self,
-        tube: &'a [(DVec3, DVec3)],
-        tube_len: f64,
-        step2: &'a [f64],
-        grow: f64,
-    ) -> impl Fn(Pair, f64) -> bool + Sync + 'a {
-        let slack = 2.0 * 3f64.sqrt() * grow;
-        let (h, band) = (self.h, PROXIMITY * self.thick);
-        move |pair, d0| {
-            let spread = spread(pair, pair.ids().map(|i| tube[i as usize].1));
-            let approach = own_reach(step2, pair).min(spread * h);
-            d0 - approach - spread * tube_len - slack < band
-        }
     }
 
     /// The vertices `s.out`, out of their tubes at the pass's times `t1 - h` and `t1` (the
@@ -1339,8 +1331,8 @@ impl Ctx<'_> {
     /// their tubes and their boxes hold them, so the candidates are what a walk would find,
     /// and more (pairs whose tubes the search would have told apart are kept if their boxes
     /// overlap). The sweeps see the new pairs through their particles' change marks.
-    fn search_around(&self, s: &mut Scratch, d: [DVec3; 2], t1: f64, mean_u: DVec3, grow: f64) {
-        let margin = 0.5 * PROXIMITY * self.thick + grow;
+    fn search_around(&self, s: &mut Scratch, d: [DVec3; 2], t1: f64, mean_u: DVec3) {
+        let margin = 0.5 * PROXIMITY * self.thick + s.grow;
         let out = std::mem::take(&mut s.out);
         s.out_mark.resize(s.p0.len(), false);
         for &i in &out {
@@ -1378,20 +1370,8 @@ impl Ctx<'_> {
         found.dedup();
         s.pairs.extend(found.iter().map(|&p| (p, 0.0)));
         self.start_distances(s, from);
-        let kept = {
-            let near = self.may_come_near(&s.tube, s.tube_len, &s.step2, grow);
-            let mut kept = from;
-            for k in from..s.pairs.len() {
-                let (pair, d0) = s.pairs[k];
-                if near(pair, d0) {
-                    s.pairs[kept] = (pair, d0);
-                    kept += 1;
-                }
-            }
-            kept
-        };
-        s.pairs.truncate(kept);
-        for k in from..kept {
+        self.keep_near(s, from);
+        for k in from..s.pairs.len() {
             let ids = s.pairs[k].0.ids();
             s.mark(&ids);
         }

@@ -375,6 +375,12 @@ fn union32(a: Box32, b: Box32) -> Box32 {
     (a.0.min(b.0), a.1.max(b.1))
 }
 
+/// A box's growth by `margin` plus the rounding of the positions (components up to `qmax`) to
+/// `f32` (half an ulp of the largest, twice over) and of the margin itself.
+fn rounded_margin(margin: f64, qmax: f32) -> Vec3A {
+    Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + qmax * f32::EPSILON)
+}
+
 /// A node: triangles `order[start..end]`; children at `child` and `child + 1` (0: a leaf).
 #[derive(Clone, Copy, Debug, Default)]
 struct Node {
@@ -847,26 +853,17 @@ impl SurfaceTree {
     /// Refits the boxes (the paths over the pass of the vertices, edges and triangles, as
     /// [`SurfaceTree::load`]ed, grown by `margin`) and the cone bits.
     pub fn refit(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]], margin: f64) {
-        // The margin plus the rounding of the positions to `f32` (half an ulp of the largest,
-        // twice over) and of the margin itself.
-        let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + self.qmax * f32::EPSILON);
+        let m = rounded_margin(margin, self.qmax);
         (self.box_origin, self.box_qmax) = (self.origin, self.qmax);
-        let (q0, q1, qmax) = (&self.q0, &self.q1, self.qmax);
-        self.vbox.resize(q0.len(), (Vec3A::ZERO, Vec3A::ZERO));
-        for ((b, &s), &e) in self.vbox.iter_mut().zip(q0).zip(q1) {
+        self.vbox.resize(self.q0.len(), (Vec3A::ZERO, Vec3A::ZERO));
+        for ((b, &s), &e) in self.vbox.iter_mut().zip(&self.q0).zip(&self.q1) {
             *b = (s.min(e) - m, s.max(e) + m);
         }
         for (b, &c) in self.vbox.iter_mut().zip(&self.q2) {
             *b = (b.0.min(c - m), b.1.max(c + m));
         }
-        let vb = &self.vbox;
-        for (t, tri) in triangles.iter().enumerate() {
-            let [a, b, c] = tri.map(|i| vb[i as usize]);
-            self.tbox[t] = union32(union32(a, b), c);
-        }
-        for (b, e) in self.ebox.iter_mut().zip(edges) {
-            *b = union32(vb[e[0] as usize], vb[e[1] as usize]);
-        }
+        self.boxes_from_vertices(triangles, edges);
+        let (q0, q1, qmax) = (&self.q0, &self.q1, self.qmax);
         self.tnormal.resize(triangles.len(), [Vec3A::ZERO; 2]);
         all_bits(
             triangles,
@@ -1118,22 +1115,28 @@ impl SurfaceTree {
             (lo.min(q), hi.max(q))
         });
         let qmax = lo.abs().max(hi.abs()).max_element().max(self.box_qmax);
-        let m = Vec3A::splat((margin as f32) * (1.0 + f32::EPSILON) + qmax * f32::EPSILON);
+        let m = rounded_margin(margin, qmax);
         self.vbox[v as usize] = (lo - m, hi + m);
     }
 
     /// The triangles', edges' and nodes' boxes again from the vertices' (after
     /// [`SurfaceTree::set_vertex_box`]).
     pub fn refit_boxes(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]]) {
+        self.boxes_from_vertices(triangles, edges);
+        self.refit_nodes(true);
+    }
+
+    /// The triangles' and edges' boxes from their vertices' (a triangle's box is the union of
+    /// its vertices').
+    fn boxes_from_vertices(&mut self, triangles: &[[u32; 3]], edges: &[[u32; 2]]) {
         let vb = &self.vbox;
         for (b, tri) in self.tbox.iter_mut().zip(triangles) {
-            let [a, b2, c] = tri.map(|i| vb[i as usize]);
-            *b = union32(union32(a, b2), c);
+            let [x, y, z] = tri.map(|i| vb[i as usize]);
+            *b = union32(union32(x, y), z);
         }
         for (b, e) in self.ebox.iter_mut().zip(edges) {
             *b = union32(vb[e[0] as usize], vb[e[1] as usize]);
         }
-        self.refit_nodes(true);
     }
 
     /// Calls `found` for every point–triangle and edge–edge pair with a feature at one of the
