@@ -1201,8 +1201,8 @@ mod plugin {
 
 /// Two 32² cloths dropped onto the sphere and the ground, stepped on one thread and on two
 /// (`kernels::with_threads`): the passes' start distances, the searches' keep test and cone
-/// bits, and the colliders' responses are cut into chunks on the team, and the 60 frames end
-/// in the same bits. (2,048 particles, 3,844 triangles and, once they touch, thousands of
+/// bits, and the colliders' responses are cut into chunks on the team, the searches' walks
+/// into pieces that each thread takes as they come, and the 60 frames end in the same bits. (2,048 particles, 3,844 triangles and, once they touch, thousands of
 /// candidate pairs: every one of those passes has several chunks.)
 #[test]
 fn a_self_colliding_pile_is_bitwise_the_same_on_one_and_two_threads() {

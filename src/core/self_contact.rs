@@ -57,12 +57,13 @@
 mod distance;
 mod tree;
 
-use crate::core::kernels::{SharedMut, for_each_range};
+use crate::core::kernels::{SharedMut, current_threads, for_each_chunk, for_each_range};
 use crate::math::{Scalar, ToScalar, Vector};
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 use std::time::{Duration, Instant};
-use tree::{Found, SurfaceTree};
+use tree::{Found, SurfaceTree, Visit};
 
 /// Settings of a surface's contact with itself and with other such surfaces.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -560,6 +561,78 @@ struct Scratch {
     out_mark: Vec<bool>,
     found: Vec<Pair>,
     searched_around: u32,
+    /// A whole search's walk ([`Ctx::walk_and_keep`]): the tree's pieces, where each one's
+    /// output lies, and each thread's lists.
+    pieces: Vec<Visit>,
+    piece_out: Vec<PieceOut>,
+    walkers: Vec<Walker>,
+}
+
+/// One thread's part of a whole search's walk ([`Ctx::walk_and_keep`]): its stack, the pairs
+/// found and not yet measured (at most [`RAW_PAIRS`]), the pairs measured and kept and the
+/// nodes culled by the pieces it took, in the order it took them, and the triangle pairs it
+/// compared.
+#[derive(Clone, Debug, Default)]
+struct Walker {
+    stack: Vec<Visit>,
+    raw: Vec<(Pair, f64)>,
+    kept: Vec<(Pair, f64)>,
+    culled: Vec<u32>,
+    tests: u64,
+}
+
+/// Where a piece's output lies: the walker that took it, and its ranges in that walker's
+/// `kept` and `culled`.
+#[derive(Clone, Copy, Debug, Default)]
+struct PieceOut {
+    walker: u32,
+    kept: [u32; 2],
+    culled: [u32; 2],
+}
+
+/// Pairs a walker finds before it measures them and keeps those that may come near: a few
+/// hundred kilobytes that stay in the cache, instead of every pair the walk finds (several
+/// times the candidates it keeps) written out and read twice.
+const RAW_PAIRS: usize = 1024;
+
+/// Measures the pairs `raw` ([`distances_in_batches`]), appends those `keep` keeps to `kept`,
+/// and empties `raw`. Not inlined into the walk, which calls it once per [`RAW_PAIRS`] pairs.
+#[inline(never)]
+fn measure_and_keep(
+    raw: &mut Vec<(Pair, f64)>,
+    kept: &mut Vec<(Pair, f64)>,
+    p0: &[DVec3],
+    keep: &Keep,
+) {
+    distances_in_batches(raw, p0);
+    for &(pair, d0) in raw.iter() {
+        if keep.keeps(pair, d0) {
+            kept.push((pair, d0));
+        }
+    }
+    raw.clear();
+}
+
+/// What [`Ctx::keep_near`] tests a candidate against: the tubes' velocities and horizon,
+/// the particles' squared paths over the pass, and the slack and band.
+struct Keep<'a> {
+    tube: &'a [(DVec3, DVec3)],
+    step2: &'a [f64],
+    tube_len: f64,
+    h: f64,
+    slack: f64,
+    band: f64,
+}
+
+impl Keep<'_> {
+    /// Whether `pair`, `d0` apart at the pass's start, may come within the proximity band
+    /// before the next search (see [`Ctx::keep_near`]). A NaN distance is not kept.
+    #[inline(always)]
+    fn keeps(&self, pair: Pair, d0: f64) -> bool {
+        let spread = spread(pair, pair.ids().map(|i| self.tube[i as usize].1));
+        let approach = own_reach(self.step2, pair).min(spread * self.h);
+        d0 - approach - spread * self.tube_len - self.slack < self.band
+    }
 }
 
 impl Scratch {
@@ -1122,6 +1195,7 @@ fn reach(step2: &[f64], u: &[DVec3], h: f64, pair: Pair, room: f64) -> f64 {
 
 /// The first bound of [`reach`]: the largest travel of a vertex of the first part plus that
 /// of the second.
+#[inline]
 fn own_reach(step2: &[f64], pair: Pair) -> f64 {
     let ids = pair.ids();
     let travel = |k: usize| step2[ids[k] as usize];
@@ -1134,6 +1208,7 @@ fn own_reach(step2: &[f64], pair: Pair) -> f64 {
 
 /// The largest difference of the velocities `v` (of the pair's four particles) of a vertex of
 /// the first part and one of the second.
+#[inline]
 fn spread(pair: Pair, v: [DVec3; 4]) -> f64 {
     let apart = |a: usize, b: usize| v[a].distance_squared(v[b]);
     match pair {
@@ -1281,9 +1356,6 @@ impl Ctx<'_> {
         s.tube_s
             .extend(s.tube.iter().map(|&(b, w)| (from_d(b), from_d(w))));
         s.tube_ref_s = from_d(mean1);
-        self.start_distances(s, 0);
-        // Keep only pairs that can come within the thickness before the next search.
-        self.keep_near(s, 0);
         s.broad_valid = true;
         s.broad_at = s.edits;
         s.searches += 1;
@@ -1300,18 +1372,13 @@ impl Ctx<'_> {
     /// velocities do). Marked on the team (a pair to drop gets a NaN distance: a NaN distance
     /// would fail the test as well), then dropped in order.
     fn keep_near(&self, s: &mut Scratch, from: usize) {
-        let slack = 2.0 * 3f64.sqrt() * s.grow;
-        let (tube, tube_len, step2) = (&s.tube, s.tube_len, &s.step2);
-        let (h, band) = (self.h, PROXIMITY * self.thick);
         let pairs = &mut s.pairs[from..];
-        let out = SharedMut(pairs.as_mut_ptr());
-        for_each_range(pairs.len(), PAIR_CHUNK, |r| {
+        let (n, out) = (pairs.len(), SharedMut(pairs.as_mut_ptr()));
+        let keep = self.keep(s);
+        for_each_range(n, PAIR_CHUNK, |r| {
             // SAFETY: each range is its own chunk's.
             for (pair, d0) in unsafe { out.slice(r) } {
-                let spread = spread(*pair, pair.ids().map(|i| tube[i as usize].1));
-                let approach = own_reach(step2, *pair).min(spread * h);
-                let keep = *d0 - approach - spread * tube_len - slack < band;
-                if !keep {
+                if !keep.keeps(*pair, *d0) {
                     *d0 = f64::NAN;
                 }
             }
@@ -1319,6 +1386,19 @@ impl Ctx<'_> {
         let mut pairs = std::mem::take(&mut s.pairs);
         pairs.retain(|&(_, d0)| !d0.is_nan());
         s.pairs = pairs;
+    }
+
+    /// [`Ctx::keep_near`]'s test, with the tubes of the last search (or of this one, once its
+    /// tubes are set).
+    fn keep<'a>(&self, s: &'a Scratch) -> Keep<'a> {
+        Keep {
+            tube: &s.tube,
+            step2: &s.step2,
+            tube_len: s.tube_len,
+            h: self.h,
+            slack: 2.0 * 3f64.sqrt() * s.grow,
+            band: PROXIMITY * self.thick,
+        }
     }
 
     /// The vertices `s.out`, out of their tubes at the pass's times `t1 - h` and `t1` (the
@@ -1423,8 +1503,7 @@ impl Ctx<'_> {
         s.tree.load(verts, &s.p0, &s.p1);
         s.tree.stretch(verts, &s.p2);
         s.tree.refit(tris, &self.surf.edges, 0.5 * reach + grow);
-        s.pairs.clear();
-        self.walk(s, false);
+        self.walk_and_keep(s);
         s.cones_at = s.edits;
         s.clear_moved();
     }
@@ -1442,6 +1521,108 @@ impl Ctx<'_> {
         let want = s.pairs.len() + s.pairs.len() / 2;
         s.pairs.reserve(want.saturating_sub(s.pairs.len()));
         s.tested += s.tree.triangle_pairs;
+    }
+
+    /// A whole search's walk on the team, as the candidates: [`SurfaceTree::plan`]'s pieces
+    /// taken by the threads as they come (a fold's pairs lie in a few of them, so fixed
+    /// shares would leave one thread most of the work), each walked by the thread that took
+    /// it, its pairs measured ([`distances_in_batches`]) and kept by [`Ctx::keep_near`]'s
+    /// test as they are found, a batch of [`RAW_PAIRS`] at a time. The kept pairs and the
+    /// culled nodes are then taken piece by piece in the plan's order: the candidates, their
+    /// order and distances are what one thread walking the whole tree, measuring every pair
+    /// and dropping those not kept, would give, on any number of threads.
+    fn walk_and_keep(&self, s: &mut Scratch) {
+        let (tris, edges) = (&self.surf.triangles, &self.surf.edges);
+        let mut pieces = std::mem::take(&mut s.pieces);
+        s.tree.plan(false, &mut pieces);
+        let threads = current_threads().max(1);
+        if s.walkers.len() < threads {
+            s.walkers.resize_with(threads, Walker::default);
+        }
+        s.piece_out
+            .reserve(pieces.capacity().saturating_sub(s.piece_out.len()));
+        s.piece_out.resize(pieces.len(), PieceOut::default());
+        let next = AtomicUsize::new(0);
+        let walkers = SharedMut(s.walkers.as_mut_ptr());
+        let outs = SharedMut(s.piece_out.as_mut_ptr());
+        let keep = self.keep(s);
+        let (tree, p0) = (&s.tree, &s.p0);
+        let measure = |raw: &mut Vec<(Pair, f64)>, kept: &mut Vec<(Pair, f64)>| {
+            measure_and_keep(raw, kept, p0, &keep)
+        };
+        for_each_chunk(threads, |w| {
+            // SAFETY: chunk `w` is walker `w`'s alone (`w < threads <= walkers.len()`).
+            let me = unsafe { &mut *walkers.ptr().add(w) };
+            let Walker {
+                stack,
+                raw,
+                kept,
+                culled,
+                tests,
+            } = me;
+            (*tests, _) = (0, raw.reserve(RAW_PAIRS));
+            kept.clear();
+            culled.clear();
+            loop {
+                let k = next.fetch_add(1, Relaxed);
+                if k >= pieces.len() {
+                    break;
+                }
+                let (k0, c0) = (kept.len() as u32, culled.len() as u32);
+                *tests += tree.walk_piece(pieces[k], tris, edges, stack, culled, &mut |f| {
+                    raw.push((pair_of(f, tris, edges), 0.0));
+                    if raw.len() == RAW_PAIRS {
+                        measure(raw, kept);
+                    }
+                });
+                measure(raw, kept);
+                let out = PieceOut {
+                    walker: w as u32,
+                    kept: [k0, kept.len() as u32],
+                    culled: [c0, culled.len() as u32],
+                };
+                // SAFETY: piece `k` was taken by this thread alone (`k < piece_out.len()`).
+                unsafe { *outs.ptr().add(k) = out };
+            }
+        });
+        // One walker took every piece (always, on one thread): its list is the candidates.
+        let alone = s
+            .piece_out
+            .iter()
+            .all(|o| o.walker == s.piece_out[0].walker);
+        if alone && !s.piece_out.is_empty() {
+            std::mem::swap(
+                &mut s.pairs,
+                &mut s.walkers[s.piece_out[0].walker as usize].kept,
+            );
+        } else {
+            s.pairs.clear();
+        }
+        for out in &s.piece_out {
+            let walker = &s.walkers[out.walker as usize];
+            if !alone {
+                let [a, b] = out.kept.map(|k| k as usize);
+                s.pairs.extend_from_slice(&walker.kept[a..b]);
+            }
+            let [a, b] = out.culled.map(|k| k as usize);
+            s.tree.take_culled(&walker.culled[a..b]);
+        }
+        let tests = s.walkers[..threads].iter().map(|w| w.tests).sum();
+        s.tree.triangle_pairs = tests;
+        s.tested += tests;
+        // Headroom of half the count (see [`Ctx::walk`]); a walker may take every piece.
+        let want = s.pairs.len() + s.pairs.len() / 2;
+        s.pairs.reserve(want.saturating_sub(s.pairs.len()));
+        let culled = s.walkers[..threads]
+            .iter()
+            .map(|w| w.culled.len())
+            .sum::<usize>();
+        for w in &mut s.walkers {
+            w.kept.reserve(want.saturating_sub(w.kept.len()));
+            w.culled
+                .reserve((culled + culled / 2).saturating_sub(w.culled.len()));
+        }
+        s.pieces = pieces;
     }
 
     /// The distance at the start of the pass (fixed for the pass: the start does not move) of

@@ -686,8 +686,13 @@ pub fn current_threads() -> usize {
 
 /// A raw pointer that may cross threads: each chunk job writes only its own, disjoint part of
 /// the slice it points into.
-#[derive(Clone, Copy)]
 pub(crate) struct SharedMut<T>(pub *mut T);
+impl<T> Clone for SharedMut<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SharedMut<T> {}
 impl<T> SharedMut<T> {
     /// The pointer (a method, so closures capture the whole `Sync` wrapper, not its field).
     #[inline(always)]

@@ -392,6 +392,16 @@ struct Node {
     connected: bool,
 }
 
+/// A pair of nodes the walk has yet to take up, and whether a node paired with itself is to be
+/// walked even if flat (a culled node found no longer flat, when a search resumes).
+pub(super) type Visit = (u32, u32, bool);
+
+/// The most triangles in either node of a pair that [`SurfaceTree::plan`] hands on as a piece
+/// of the walk: tens of pieces on a 64² cloth's 7,938 triangles (more where it folds), each
+/// microseconds of work, so that two threads taking them as they come end within a piece of
+/// each other.
+const PIECE_TRIANGLES: u32 = 64;
+
 /// The hierarchy and what its last search found.
 #[derive(Clone, Debug, Default)]
 pub(super) struct SurfaceTree {
@@ -459,7 +469,10 @@ pub(super) struct SurfaceTree {
     around_stack: Vec<u32>,
     around_tris: Vec<u32>,
     around_edges: Vec<u32>,
-    stack: Vec<(u32, u32, bool)>,
+    stack: Vec<Visit>,
+    /// Scratch of [`SurfaceTree::search`]: its pieces, and the nodes a piece culled.
+    pieces: Vec<Visit>,
+    piece_culled: Vec<u32>,
     /// Triangle pairs the last search compared.
     pub triangle_pairs: u64,
 }
@@ -1013,14 +1026,17 @@ impl SurfaceTree {
         }
     }
 
-    /// Walks the tree against itself (after [`SurfaceTree::refit`]) and calls `pt(p, t)` for
-    /// every point–triangle pair and `ee(e, f)` for every edge–edge pair (edge indices) whose
-    /// boxes (the refit's) overlap, neither sharing a particle, each once; flat connected
-    /// nodes are culled.
+    /// Walks the tree against itself (after [`SurfaceTree::refit`]) and calls `found` for
+    /// every point–triangle pair and every edge–edge pair (edge indices) whose boxes (the
+    /// refit's) overlap, neither sharing a particle, each once; flat connected nodes are
+    /// culled.
     ///
     /// With `resume`, only the nodes that [`SurfaceTree::still_flat`] found no longer
     /// flat are walked (the boxes of the last refit still holding the paths, and the bits
     /// those of the paths now): the pairs they hold are added to what the last search found.
+    ///
+    /// The walk is [`SurfaceTree::plan`]'s pieces walked in order ([`SurfaceTree::walk_piece`]),
+    /// which is how the team walks them too, each piece on whichever thread takes it.
     pub fn search(
         &mut self,
         triangles: &[[u32; 3]],
@@ -1028,6 +1044,29 @@ impl SurfaceTree {
         resume: bool,
         mut found: impl FnMut(Found),
     ) {
+        let mut pieces = std::mem::take(&mut self.pieces);
+        self.plan(resume, &mut pieces);
+        let mut stack = std::mem::take(&mut self.stack);
+        let mut culled = std::mem::take(&mut self.piece_culled);
+        let mut tests = 0;
+        for &piece in &pieces {
+            culled.clear();
+            tests += self.walk_piece(piece, triangles, edges, &mut stack, &mut culled, &mut found);
+            self.take_culled(&culled);
+        }
+        self.triangle_pairs = tests;
+        (self.pieces, self.stack, self.piece_culled) = (pieces, stack, culled);
+    }
+
+    /// The top of a walk (see [`SurfaceTree::search`]), down to pairs of nodes of at most
+    /// [`PIECE_TRIANGLES`] triangles each, which it lists in `pieces` in the order a walk
+    /// takes them up, rather than walking on into them; a node to be culled as flat is a
+    /// piece too. The pieces, walked in that order, find what the whole walk finds in the
+    /// order it finds it (the walk is depth first: a pair's descendants are all taken up
+    /// before the next pair), and cull what it culls; any thread can walk any piece (they
+    /// only read the tree). Clears what the last search culled unless `resume`.
+    pub fn plan(&mut self, resume: bool, pieces: &mut Vec<Visit>) {
+        pieces.clear();
         self.triangle_pairs = 0;
         if self.nodes.is_empty() {
             return;
@@ -1044,15 +1083,46 @@ impl SurfaceTree {
             self.culled_of.fill(NONE);
             stack.push((0, 0, false));
         }
+        while let Some(visit @ (a, b, keep)) = stack.pop() {
+            let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
+            if a != b && !overlap32(&self.nbox[a as usize], &self.nbox[b as usize]) {
+                continue;
+            }
+            let small = (na.end - na.start).max(nb.end - nb.start) <= PIECE_TRIANGLES;
+            let leaves = na.child == 0 && nb.child == 0;
+            if small || leaves || (a == b && self.flat(a, keep)) {
+                pieces.push(visit);
+            } else {
+                self.children(a, b, &mut stack);
+            }
+        }
+        self.stack = stack;
+        // Headroom, as for the candidates: a walk should not allocate each time it passes
+        // the last largest count.
+        pieces.reserve(pieces.len() / 2);
+    }
+
+    /// Walks the node pair `piece` (one of [`SurfaceTree::plan`]'s), calling `found` for the
+    /// pairs in it and listing in `culled` the nodes it culls as flat (for
+    /// [`SurfaceTree::take_culled`]); returns the number of triangle pairs it compared.
+    /// Reads the tree only, so that the team's threads walk pieces side by side.
+    pub fn walk_piece(
+        &self,
+        piece: Visit,
+        triangles: &[[u32; 3]],
+        edges: &[[u32; 2]],
+        stack: &mut Vec<Visit>,
+        culled: &mut Vec<u32>,
+        found: &mut impl FnMut(Found),
+    ) -> u64 {
+        stack.clear();
+        stack.push(piece);
         let mut tests = 0u64;
         while let Some((a, b, keep)) = stack.pop() {
             let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
             if a == b {
-                if !keep && na.connected && self.nbits[a as usize] != 0 {
-                    self.culled.push(a);
-                    for &t in &self.order[na.start as usize..na.end as usize] {
-                        self.culled_of[t as usize] = a;
-                    }
+                if self.flat(a, keep) {
+                    culled.push(a);
                     continue;
                 }
                 if na.child == 0 {
@@ -1060,50 +1130,75 @@ impl SurfaceTree {
                     for i in 0..ts.len() {
                         for j in i + 1..ts.len() {
                             tests += 1;
-                            self.pair(triangles, edges, ts[i], ts[j], &mut found);
+                            self.pair(triangles, edges, ts[i], ts[j], found);
                         }
                     }
-                } else {
-                    let (l, r) = (na.child, na.child + 1);
-                    stack.push((l, r, false));
-                    stack.push((r, r, false));
-                    stack.push((l, l, false));
+                    continue;
                 }
-                continue;
-            }
-            if !overlap32(&self.nbox[a as usize], &self.nbox[b as usize]) {
-                continue;
-            }
-            match (na.child == 0, nb.child == 0) {
-                (true, true) => {
+            } else {
+                if !overlap32(&self.nbox[a as usize], &self.nbox[b as usize]) {
+                    continue;
+                }
+                if na.child == 0 && nb.child == 0 {
                     for &t in &self.order[na.start as usize..na.end as usize] {
                         for &u in &self.order[nb.start as usize..nb.end as usize] {
                             tests += 1;
-                            self.pair(triangles, edges, t, u, &mut found);
+                            self.pair(triangles, edges, t, u, found);
                         }
                     }
-                }
-                (false, true) => {
-                    stack.push((na.child + 1, b, false));
-                    stack.push((na.child, b, false));
-                }
-                (true, false) => {
-                    stack.push((a, nb.child + 1, false));
-                    stack.push((a, nb.child, false));
-                }
-                (false, false) => {
-                    if na.end - na.start >= nb.end - nb.start {
-                        stack.push((na.child + 1, b, false));
-                        stack.push((na.child, b, false));
-                    } else {
-                        stack.push((a, nb.child + 1, false));
-                        stack.push((a, nb.child, false));
-                    }
+                    continue;
                 }
             }
+            self.children(a, b, stack);
         }
-        self.stack = stack;
-        self.triangle_pairs = tests;
+        tests
+    }
+
+    /// Records the nodes a piece culled ([`SurfaceTree::walk_piece`]), pieces in order, as
+    /// culled by the search: [`SurfaceTree::still_flat`] checks them and
+    /// [`SurfaceTree::search_around`] leaves their pairs out.
+    pub fn take_culled(&mut self, culled: &[u32]) {
+        for &a in culled {
+            self.culled.push(a);
+            let n = self.nodes[a as usize];
+            for &t in &self.order[n.start as usize..n.end as usize] {
+                self.culled_of[t as usize] = a;
+            }
+        }
+    }
+
+    /// Whether node `a`, paired with itself, is culled: one connected piece whose triangles
+    /// share a hemisphere (unless `keep`: a culled node found no longer flat).
+    #[inline]
+    fn flat(&self, a: u32, keep: bool) -> bool {
+        !keep && self.nodes[a as usize].connected && self.nbits[a as usize] != 0
+    }
+
+    /// Pushes the pairs of children that the walk takes up after the pair of nodes `a` and
+    /// `b` (not both leaves): a node against itself, its children against each other and
+    /// each against itself; two nodes, the larger one's children against the other.
+    #[inline]
+    fn children(&self, a: u32, b: u32, stack: &mut Vec<Visit>) {
+        let (na, nb) = (self.nodes[a as usize], self.nodes[b as usize]);
+        if a == b {
+            let (l, r) = (na.child, na.child + 1);
+            stack.push((l, r, false));
+            stack.push((r, r, false));
+            stack.push((l, l, false));
+            return;
+        }
+        let split_a = match (na.child == 0, nb.child == 0) {
+            (false, true) => true,
+            (true, false) => false,
+            _ => na.end - na.start >= nb.end - nb.start,
+        };
+        if split_a {
+            stack.push((na.child + 1, b, false));
+            stack.push((na.child, b, false));
+        } else {
+            stack.push((a, nb.child + 1, false));
+            stack.push((a, nb.child, false));
+        }
     }
 
     /// Gives vertex `v` the box of the points `pts` grown by `margin`, in place of the one the
