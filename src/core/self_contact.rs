@@ -53,6 +53,10 @@
 //! motion: see [`AHEAD`]), and the patches it culled stay flat. When a pass outlasts that
 //! horizon (frame-long steps), a few vertices its own impulses take out of their tubes get
 //! new ones, and only their pairs are looked for again ([`SHORT_GROW`], [`AROUND_SHARE`]).
+//! On a team of threads, a whole search's walk is cut into pieces that the threads take as
+//! they come, each measuring and keeping its pairs as it finds them; the pieces' outputs
+//! are joined in the walk's own order, so the candidates are the same on any number of
+//! threads (see `Ctx::walk_and_keep`).
 
 mod distance;
 mod tree;
